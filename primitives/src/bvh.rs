@@ -1,0 +1,178 @@
+//! A flat binary BVH built by obvhs (PLOC + reinsertion + collapse), converted to a
+//! compact node layout of our own that the tracer walks front to back with a
+//! shrinking `tmax` (house rule 3: it sees only boxes and a closure).
+
+use glam::Vec3;
+use obvhs::{aabb::Aabb as OAabb, bvh2::builder::build_bvh2, BvhBuildParams};
+use smallvec::SmallVec;
+
+use crate::aabb::Aabb;
+
+/// One node: a leaf when `count > 0` (primitives `prims[first..first + count]`),
+/// otherwise an inner node with children `first` and `first + 1`.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+pub struct BvhNode {
+    /// Box minimum.
+    pub min: Vec3,
+    /// First child or first primitive slot.
+    pub first: u32,
+    /// Box maximum.
+    pub max: Vec3,
+    /// Primitive count (0 for inner nodes).
+    pub count: u32,
+}
+
+/// A BVH over a set of boxes; `prims` lists primitive ids in leaf order.
+#[derive(Clone, Debug, Default)]
+pub struct FlatBvh {
+    /// Nodes, root first.
+    pub nodes: Vec<BvhNode>,
+    /// Primitive ids referenced by the leaves.
+    pub prims: Vec<u32>,
+}
+
+impl FlatBvh {
+    /// Builds over `boxes` (all must be finite and non-empty). `max_leaf` primitives per leaf at most.
+    pub fn build(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
+        if boxes.is_empty() {
+            return FlatBvh::default();
+        }
+        if boxes.len() <= max_leaf as usize {
+            let mut b = Aabb::EMPTY;
+            for x in boxes {
+                b = b.union(x);
+            }
+            return FlatBvh {
+                nodes: vec![BvhNode { min: b.min, first: 0, max: b.max, count: boxes.len() as u32 }],
+                prims: (0..boxes.len() as u32).collect(),
+            };
+        }
+        let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
+        let mut params = BvhBuildParams::medium_build();
+        params.max_prims_per_leaf = max_leaf.max(1);
+        let mut t = std::time::Duration::ZERO;
+        let b2 = build_bvh2(&oboxes, params, &mut t);
+        let nodes = b2
+            .nodes
+            .iter()
+            .map(|n| {
+                let a = n.aabb();
+                BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
+            })
+            .collect();
+        FlatBvh { nodes, prims: b2.primitive_indices.clone() }
+    }
+
+    /// Root box (empty for an empty BVH).
+    pub fn bounds(&self) -> Aabb {
+        self.nodes.first().map(|n| Aabb::new(n.min, n.max)).unwrap_or(Aabb::EMPTY)
+    }
+
+    /// Visits, roughly nearest first, every primitive whose leaf box the ray
+    /// segment `[tmin, tmax]` touches. `f(prim, t_enter_box)` returns the new `tmax`
+    /// (return the current one to keep going; a smaller one prunes farther nodes;
+    /// a value below `tmin` stops the walk).
+    #[inline]
+    pub fn traverse(&self, o: Vec3, inv_d: Vec3, tmin: f32, mut tmax: f32, mut f: impl FnMut(u32, f32) -> f32) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
+        let root = &self.nodes[0];
+        let Some((t0, _)) = Aabb::new(root.min, root.max).ray_range(o, inv_d, tmin, tmax) else { return };
+        stack.push((0, t0));
+        while let Some((ni, tenter)) = stack.pop() {
+            if tenter > tmax {
+                continue;
+            }
+            let n = &self.nodes[ni as usize];
+            if n.count > 0 {
+                for k in n.first..n.first + n.count {
+                    tmax = f(self.prims[k as usize], tenter);
+                    if tmax < tmin {
+                        return;
+                    }
+                }
+                continue;
+            }
+            let a = &self.nodes[n.first as usize];
+            let b = &self.nodes[n.first as usize + 1];
+            let ra = Aabb::new(a.min, a.max).ray_range(o, inv_d, tmin, tmax);
+            let rb = Aabb::new(b.min, b.max).ray_range(o, inv_d, tmin, tmax);
+            match (ra, rb) {
+                (Some((ta, _)), Some((tb, _))) => {
+                    if ta <= tb {
+                        stack.push((n.first + 1, tb));
+                        stack.push((n.first, ta));
+                    } else {
+                        stack.push((n.first, ta));
+                        stack.push((n.first + 1, tb));
+                    }
+                }
+                (Some((ta, _)), None) => stack.push((n.first, ta)),
+                (None, Some((tb, _))) => stack.push((n.first + 1, tb)),
+                _ => {}
+            }
+        }
+    }
+
+    /// Visits every primitive whose leaf box contains `p`.
+    pub fn point_query(&self, p: Vec3, mut f: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
+        stack.push(0);
+        while let Some(ni) = stack.pop() {
+            let n = &self.nodes[ni as usize];
+            if !Aabb::new(n.min, n.max).contains(p) {
+                continue;
+            }
+            if n.count > 0 {
+                for k in n.first..n.first + n.count {
+                    f(self.prims[k as usize]);
+                }
+            } else {
+                stack.push(n.first);
+                stack.push(n.first + 1);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    #[test]
+    fn traversal_matches_brute_force() {
+        let seed = 7u64;
+        println!("seed {seed}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let boxes: Vec<Aabb> = (0..500)
+            .map(|_| {
+                let c = Vec3::new(rng.gen_range(-10.0..10.0), rng.gen_range(-10.0..10.0), rng.gen_range(-10.0..10.0));
+                let h = Vec3::splat(rng.gen_range(0.05..1.0));
+                Aabb::new(c - h, c + h)
+            })
+            .collect();
+        let bvh = FlatBvh::build(&boxes, 4);
+        for _ in 0..2000 {
+            let o = Vec3::new(rng.gen_range(-15.0..15.0), rng.gen_range(-15.0..15.0), rng.gen_range(-15.0..15.0));
+            let d = Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
+            let inv = d.recip();
+            let mut got = vec![];
+            bvh.traverse(o, inv, 0.0, 30.0, |p, _| {
+                got.push(p);
+                30.0
+            });
+            for (i, b) in boxes.iter().enumerate() {
+                if b.ray_range(o, inv, 0.0, 30.0).is_some() {
+                    assert!(got.contains(&(i as u32)), "missed box {i}");
+                }
+            }
+        }
+    }
+}

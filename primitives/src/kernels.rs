@@ -1,0 +1,322 @@
+//! Ray kernels of the analytic leaves, in each leaf's canonical local space.
+//!
+//! Every kernel takes the ray already mapped into local space (origin `o`,
+//! direction `d`, not normalised: t is the caller's t) and reports the full,
+//! unclipped parameter range of the line inside the solid; the caller clips it.
+//! Canonical forms (see [`crate::table`]): unit sphere at the origin; box
+//! `[min, max]`; unit cylinder `x^2+y^2 <= 1, 0 <= z <= 1`; frustum with radius
+//! `ra + (rb - ra) z` on `0 <= z <= 1` (max radius 1); torus around z with major
+//! radius 1 and minor radius `rho` (f64 quartic); half-space `n . p <= offset`.
+
+use glam::{DVec3, Vec3};
+
+use crate::poly;
+
+/// Sub-surface ids reported with crossings (used to compute normals lazily).
+pub mod sub {
+    /// Curved side (cylinder, cone) or the only surface (sphere, torus, plane).
+    pub const SIDE: u32 = 0;
+    /// Cap at z = 0.
+    pub const CAP0: u32 = 1;
+    /// Cap at z = 1.
+    pub const CAP1: u32 = 2;
+}
+
+/// A line's range inside a convex leaf: `(t_in, sub_in, t_out, sub_out)`; infinite
+/// ends are allowed (the half-space, a cylinder along its axis).
+pub type Range = (f32, u32, f32, u32);
+
+/// Unit sphere. Uses the closest-approach form of the discriminant (Ray Tracing
+/// Gems, ch. 7), which keeps small, distant spheres accurate in f32.
+#[inline(always)]
+pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
+    let a = d.length_squared();
+    let b = o.dot(d);
+    let f = o - d * (b / a);
+    let disc = a * (1.0 - f.length_squared());
+    if !(disc >= 0.0) {
+        return None;
+    }
+    let c = o.length_squared() - 1.0;
+    let q = -(b + disc.sqrt().copysign(b));
+    let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
+    let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
+    Some((t0, sub::SIDE, t1, sub::SIDE))
+}
+
+/// Axis-aligned box `[mn, mx]`; sub = axis * 2 + (1 for the max face).
+#[inline(always)]
+pub fn cuboid(o: Vec3, d: Vec3, mn: Vec3, mx: Vec3) -> Option<Range> {
+    let inv = d.recip();
+    let mut t_in = f32::NEG_INFINITY;
+    let mut t_out = f32::INFINITY;
+    let mut s_in = 0;
+    let mut s_out = 0;
+    for a in 0..3 {
+        if d[a] == 0.0 {
+            if o[a] < mn[a] || o[a] > mx[a] {
+                return None;
+            }
+            continue;
+        }
+        let ta = (mn[a] - o[a]) * inv[a];
+        let tb = (mx[a] - o[a]) * inv[a];
+        let (tn, sn, tf, sf) = if ta <= tb {
+            (ta, a as u32 * 2, tb, a as u32 * 2 + 1)
+        } else {
+            (tb, a as u32 * 2 + 1, ta, a as u32 * 2)
+        };
+        if tn > t_in {
+            t_in = tn;
+            s_in = sn;
+        }
+        if tf < t_out {
+            t_out = tf;
+            s_out = sf;
+        }
+    }
+    if t_in <= t_out { Some((t_in, s_in, t_out, s_out)) } else { None }
+}
+
+/// Range of the slab `0 <= z <= 1`.
+#[inline(always)]
+fn slab01(oz: f32, dz: f32) -> Option<Range> {
+    if dz == 0.0 {
+        return if (0.0..=1.0).contains(&oz) {
+            Some((f32::NEG_INFINITY, sub::CAP0, f32::INFINITY, sub::CAP1))
+        } else {
+            None
+        };
+    }
+    let ta = -oz / dz;
+    let tb = (1.0 - oz) / dz;
+    Some(if ta <= tb { (ta, sub::CAP0, tb, sub::CAP1) } else { (tb, sub::CAP1, ta, sub::CAP0) })
+}
+
+#[inline(always)]
+fn and(a: Range, b: Range) -> Option<Range> {
+    let (t0, s0) = if a.0 >= b.0 { (a.0, a.1) } else { (b.0, b.1) };
+    let (t1, s1) = if a.2 <= b.2 { (a.2, a.3) } else { (b.2, b.3) };
+    if t0 <= t1 { Some((t0, s0, t1, s1)) } else { None }
+}
+
+/// Unit capped cylinder.
+#[inline(always)]
+pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
+    let slab = slab01(o.z, d.z)?;
+    let a = d.x * d.x + d.y * d.y;
+    let side = if a == 0.0 {
+        if o.x * o.x + o.y * o.y > 1.0 {
+            return None;
+        }
+        (f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE)
+    } else {
+        let b = o.x * d.x + o.y * d.y;
+        let fx = o.x - d.x * (b / a);
+        let fy = o.y - d.y * (b / a);
+        let disc = a * (1.0 - (fx * fx + fy * fy));
+        if !(disc >= 0.0) {
+            return None;
+        }
+        let c = o.x * o.x + o.y * o.y - 1.0;
+        let q = -(b + disc.sqrt().copysign(b));
+        let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
+        if t0 <= t1 { (t0, sub::SIDE, t1, sub::SIDE) } else { (t1, sub::SIDE, t0, sub::SIDE) }
+    };
+    and(side, slab)
+}
+
+/// Frustum with radius `ra + (rb - ra) z` over `0 <= z <= 1`.
+#[inline(always)]
+pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
+    let slab = slab01(o.z, d.z)?;
+    let k = rb - ra;
+    let w0 = ra + k * o.z; // radius at the origin's height
+    let wd = k * d.z;
+    // q(t) = |xy(t)|^2 - (w0 + wd t)^2 = A t^2 + 2 B t + C
+    let a = d.x * d.x + d.y * d.y - wd * wd;
+    let b = o.x * d.x + o.y * d.y - w0 * wd;
+    let c = o.x * o.x + o.y * o.y - w0 * w0;
+    let full = (f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE);
+    let mut pieces: [Option<Range>; 2] = [None, None];
+    if a.abs() <= 1e-12 * (d.x * d.x + d.y * d.y + wd * wd) {
+        // Linear: 2 B t + C <= 0 (ray parallel to a generator).
+        if b == 0.0 {
+            if c <= 0.0 {
+                pieces[0] = Some(full);
+            }
+        } else {
+            let t = -c / (2.0 * b);
+            pieces[0] = Some(if b > 0.0 {
+                (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE)
+            } else {
+                (t, sub::SIDE, f32::INFINITY, sub::SIDE)
+            });
+        }
+    } else {
+        let disc = b * b - a * c;
+        if disc < 0.0 {
+            if a < 0.0 {
+                pieces[0] = Some(full);
+            }
+        } else {
+            let q = -(b + disc.sqrt().copysign(b));
+            let (mut t0, mut t1) = if q == 0.0 { (-b / a, -b / a) } else { (c / q, q / a) };
+            if t0 > t1 {
+                std::mem::swap(&mut t0, &mut t1);
+            }
+            if a > 0.0 {
+                pieces[0] = Some((t0, sub::SIDE, t1, sub::SIDE));
+            } else {
+                pieces[0] = Some((f32::NEG_INFINITY, sub::SIDE, t0, sub::SIDE));
+                pieces[1] = Some((t1, sub::SIDE, f32::INFINITY, sub::SIDE));
+            }
+        }
+    }
+    // Within the slab only the nappe with a non-negative radius remains, so at
+    // most one piece survives (both only through rounding next to the apex: the
+    // frustum is convex, so take their hull).
+    let mut out: Option<Range> = None;
+    for p in pieces.into_iter().flatten() {
+        if let Some(r) = and(p, slab) {
+            // The other nappe: reject pieces whose midpoint has negative radius.
+            let tm = match (r.0.is_finite(), r.2.is_finite()) {
+                (true, true) => 0.5 * (r.0 + r.2),
+                (true, false) => r.0,
+                (false, true) => r.2,
+                _ => 0.0,
+            };
+            if w0 + wd * tm < -1e-6 {
+                continue;
+            }
+            out = Some(match out {
+                None => r,
+                Some(q) => {
+                    let (t0, s0) = if q.0 <= r.0 { (q.0, q.1) } else { (r.0, r.1) };
+                    let (t1, s1) = if q.2 >= r.2 { (q.2, q.3) } else { (r.2, r.3) };
+                    (t0, s0, t1, s1)
+                }
+            });
+        }
+    }
+    out
+}
+
+/// Half-space `n . p <= offset` (n unit length).
+#[inline(always)]
+pub fn half_space(o: Vec3, d: Vec3, n: Vec3, offset: f32) -> Option<Range> {
+    let den = n.dot(d);
+    let num = offset - n.dot(o);
+    if den == 0.0 {
+        return if num >= 0.0 { Some((f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE)) } else { None };
+    }
+    let t = num / den;
+    Some(if den > 0.0 {
+        (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE)
+    } else {
+        (t, sub::SIDE, f32::INFINITY, sub::SIDE)
+    })
+}
+
+/// Is the local point inside the torus (major 1, minor `rho`, axis z)?
+#[inline]
+pub fn torus_contains(p: DVec3, rho: f64) -> bool {
+    let q = (p.x * p.x + p.y * p.y).sqrt() - 1.0;
+    q * q + p.z * p.z <= rho * rho
+}
+
+/// Torus around z, major radius 1, minor `rho` (a spindle torus when rho > 1).
+/// Pushes up to two spans `(t_in, t_out)` (unclipped), in increasing order;
+/// returns how many. The quartic is solved in f64 after moving the origin to the
+/// ray's closest approach to the centre and normalising the direction (small,
+/// well-scaled coefficients), roots are isolated through the derivative (so
+/// grazing pairs are not lost) and polished by Newton to f64 precision; spans
+/// come from classifying the midpoints between roots, which stays right for
+/// spindle tori and through tangencies.
+pub fn torus(o: Vec3, d: Vec3, rho: f32, out: &mut [(f32, f32); 3]) -> usize {
+    let rho = rho as f64;
+    let o = o.as_dvec3();
+    let dl = d.as_dvec3().length();
+    if !(dl > 0.0) {
+        return 0;
+    }
+    let dn = d.as_dvec3() / dl;
+    let tc = -o.dot(dn);
+    let oc = o + dn * tc;
+    let rb = 1.0 + rho;
+    let h2 = rb * rb - oc.length_squared();
+    if h2 <= 0.0 {
+        return 0;
+    }
+    let h = h2.sqrt() * (1.0 + 1e-9) + 1e-12;
+    let e = oc.length_squared() + 1.0 - rho * rho;
+    let a2 = dn.x * dn.x + dn.y * dn.y;
+    let a1 = oc.x * dn.x + oc.y * dn.y;
+    let a0 = oc.x * oc.x + oc.y * oc.y;
+    // q(s) = (s^2 + e)^2 - 4 (a2 s^2 + 2 a1 s + a0), s = distance from oc.
+    let c = [e * e - 4.0 * a0, -8.0 * a1, 2.0 * e - 4.0 * a2, 0.0, 1.0];
+    let mut roots = [0.0; poly::MAX_DEGREE];
+    let n = poly::roots_in(&c, -h, h, &mut roots);
+    // Breakpoints: -h, roots..., h; classify each piece by its midpoint.
+    let mut pts = [0.0f64; 8];
+    pts[0] = -h;
+    let mut np = 1;
+    for &r in &roots[..n.min(4)] {
+        if r > pts[np - 1] {
+            pts[np] = r;
+            np += 1;
+        }
+    }
+    if h > pts[np - 1] {
+        pts[np] = h;
+        np += 1;
+    }
+    let mut count = 0;
+    let mut open: Option<f64> = None;
+    for i in 0..np - 1 {
+        let m = 0.5 * (pts[i] + pts[i + 1]);
+        let inside = torus_contains(oc + dn * m, rho);
+        match (inside, open) {
+            (true, None) => open = Some(pts[i]),
+            (false, Some(s)) => {
+                if count < out.len() {
+                    out[count] = (((s + tc) / dl) as f32, ((pts[i] + tc) / dl) as f32);
+                    count += 1;
+                }
+                open = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = open {
+        if count < out.len() {
+            out[count] = (((s + tc) / dl) as f32, ((pts[np - 1] + tc) / dl) as f32);
+            count += 1;
+        }
+    }
+    count
+}
+
+/// f64 reference for tests: the torus crossings by dense sampling plus bisection.
+#[doc(hidden)]
+pub fn torus_reference(o: DVec3, d: DVec3, rho: f64, t0: f64, t1: f64, samples: usize) -> Vec<f64> {
+    let mut res = Vec::new();
+    let f = |t: f64| torus_contains(o + d * t, rho);
+    let mut prev_t = t0;
+    let mut prev = f(t0);
+    for i in 1..=samples {
+        let t = t0 + (t1 - t0) * i as f64 / samples as f64;
+        let cur = f(t);
+        if cur != prev {
+            let (mut a, mut b) = (prev_t, t);
+            for _ in 0..80 {
+                let m = 0.5 * (a + b);
+                if f(m) == prev { a = m } else { b = m }
+            }
+            res.push(0.5 * (a + b));
+        }
+        prev = cur;
+        prev_t = t;
+    }
+    res
+}

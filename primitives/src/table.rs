@@ -1,0 +1,483 @@
+//! Leaf descriptions, their canonical forms, and the SoA leaf table the tracer reads.
+
+use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec4};
+
+use crate::{aabb::Aabb, kernels, Span, SpanSink, Surf};
+
+/// Ball.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sphere {
+    /// Centre.
+    pub center: Vec3,
+    /// Radius (> 0).
+    pub radius: f32,
+}
+/// Axis-aligned box (in the node's own frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cuboid {
+    /// Smallest corner.
+    pub min: Vec3,
+    /// Largest corner (`min <= max` per axis).
+    pub max: Vec3,
+}
+/// Capped cylinder from `a` to `b`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cylinder {
+    /// Centre of the first cap.
+    pub a: Vec3,
+    /// Centre of the second cap.
+    pub b: Vec3,
+    /// Radius (> 0).
+    pub radius: f32,
+}
+/// Capped frustum from `a` (radius `radius_a`) to `b` (radius `radius_b`); one radius may be 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    /// Centre of the first cap.
+    pub a: Vec3,
+    /// Centre of the second cap.
+    pub b: Vec3,
+    /// Radius at `a` (>= 0).
+    pub radius_a: f32,
+    /// Radius at `b` (>= 0).
+    pub radius_b: f32,
+}
+/// Ring of points within `minor` of the circle of radius `major` around `axis` through `center`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Torus {
+    /// Centre.
+    pub center: Vec3,
+    /// Axis (any non-zero length).
+    pub axis: Vec3,
+    /// Radius of the centre circle (> 0).
+    pub major: f32,
+    /// Radius of the tube (> 0).
+    pub minor: f32,
+}
+/// Half-space of points `p` with `dot(normal, p) <= offset`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HalfSpace {
+    /// Outward normal (any non-zero length).
+    pub normal: Vec3,
+    /// Offset along the normal.
+    pub offset: f32,
+}
+
+/// Any analytic leaf (the cold-path description).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LeafShape {
+    /// See [`Sphere`].
+    Sphere(Sphere),
+    /// See [`Cuboid`].
+    Cuboid(Cuboid),
+    /// See [`Cylinder`].
+    Cylinder(Cylinder),
+    /// See [`Cone`].
+    Cone(Cone),
+    /// See [`Torus`].
+    Torus(Torus),
+    /// See [`HalfSpace`].
+    HalfSpace(HalfSpace),
+}
+
+/// The fieldless kind tag the hot path matches on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum LeafKind {
+    /// Unit sphere.
+    Sphere,
+    /// Box `[p0, p1]`.
+    Cuboid,
+    /// Unit capped cylinder.
+    Cylinder,
+    /// Frustum, radii in `p0.x`, `p0.y`.
+    Cone,
+    /// Torus, minor radius (major = 1) in `p0.x`.
+    Torus,
+    /// Half-space, normal in `p0.xyz`, offset in `p0.w`.
+    HalfSpace,
+}
+
+/// A problem with a leaf's numbers: the field and what is wrong.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShapeError {
+    /// Name of the offending field (as in the scene format).
+    pub field: &'static str,
+    /// What is wrong.
+    pub message: String,
+}
+
+fn err(field: &'static str, message: impl Into<String>) -> ShapeError {
+    ShapeError { field, message: message.into() }
+}
+fn finite_v(field: &'static str, v: Vec3) -> Result<(), ShapeError> {
+    if v.is_finite() { Ok(()) } else { Err(err(field, "must be finite")) }
+}
+fn positive(field: &'static str, x: f32) -> Result<(), ShapeError> {
+    if x.is_finite() && x > 0.0 { Ok(()) } else { Err(err(field, format!("must be a positive finite number, got {x}"))) }
+}
+
+/// Two unit vectors completing `w` (unit) to a right-handed orthonormal frame (Duff et al. 2017).
+pub fn orthonormal_basis(w: DVec3) -> (DVec3, DVec3) {
+    let s = 1.0f64.copysign(w.z);
+    let a = -1.0 / (s + w.z);
+    let b = w.x * w.y * a;
+    (DVec3::new(1.0 + s * w.x * w.x * a, s * b, -s * w.x), DVec3::new(b, s + w.y * w.y * a, -w.y))
+}
+
+/// A leaf reduced to its canonical form.
+#[derive(Clone, Copy, Debug)]
+pub struct Canonical {
+    /// Kind tag.
+    pub kind: LeafKind,
+    /// Maps canonical local space to the shape's own (node) space.
+    pub node_from_local: DAffine3,
+    /// Kind-specific parameters.
+    pub p0: Vec4,
+    /// Kind-specific parameters.
+    pub p1: Vec4,
+}
+
+impl LeafShape {
+    /// Checks the numbers (the error names the field).
+    pub fn validate(&self) -> Result<(), ShapeError> {
+        match *self {
+            LeafShape::Sphere(s) => {
+                finite_v("center", s.center)?;
+                positive("radius", s.radius)
+            }
+            LeafShape::Cuboid(b) => {
+                finite_v("min", b.min)?;
+                finite_v("max", b.max)?;
+                if b.min.cmpgt(b.max).any() {
+                    return Err(err("min", format!("min {:?} is above max {:?}", b.min.to_array(), b.max.to_array())));
+                }
+                Ok(())
+            }
+            LeafShape::Cylinder(c) => {
+                finite_v("a", c.a)?;
+                finite_v("b", c.b)?;
+                positive("radius", c.radius)?;
+                if c.a == c.b {
+                    return Err(err("b", "a and b coincide (zero-length axis)"));
+                }
+                Ok(())
+            }
+            LeafShape::Cone(c) => {
+                finite_v("a", c.a)?;
+                finite_v("b", c.b)?;
+                if !(c.radius_a.is_finite() && c.radius_a >= 0.0) {
+                    return Err(err("radius_a", format!("must be a finite number >= 0, got {}", c.radius_a)));
+                }
+                if !(c.radius_b.is_finite() && c.radius_b >= 0.0) {
+                    return Err(err("radius_b", format!("must be a finite number >= 0, got {}", c.radius_b)));
+                }
+                if c.radius_a == 0.0 && c.radius_b == 0.0 {
+                    return Err(err("radius_a", "radius_a and radius_b are both 0"));
+                }
+                if c.a == c.b {
+                    return Err(err("b", "a and b coincide (zero-length axis)"));
+                }
+                Ok(())
+            }
+            LeafShape::Torus(t) => {
+                finite_v("center", t.center)?;
+                finite_v("axis", t.axis)?;
+                if t.axis.length_squared() == 0.0 {
+                    return Err(err("axis", "is the zero vector"));
+                }
+                positive("major", t.major)?;
+                positive("minor", t.minor)
+            }
+            LeafShape::HalfSpace(h) => {
+                finite_v("normal", h.normal)?;
+                if h.normal.length_squared() == 0.0 {
+                    return Err(err("normal", "is the zero vector"));
+                }
+                if !h.offset.is_finite() {
+                    return Err(err("offset", "must be finite"));
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// Canonical form (call [`LeafShape::validate`] first).
+    pub fn canonical(&self) -> Canonical {
+        let z = Vec4::ZERO;
+        match *self {
+            LeafShape::Sphere(s) => Canonical {
+                kind: LeafKind::Sphere,
+                node_from_local: DAffine3::from_scale_rotation_translation(
+                    DVec3::splat(s.radius as f64),
+                    Default::default(),
+                    s.center.as_dvec3(),
+                ),
+                p0: z,
+                p1: z,
+            },
+            LeafShape::Cuboid(b) => Canonical {
+                kind: LeafKind::Cuboid,
+                node_from_local: DAffine3::IDENTITY,
+                p0: b.min.extend(0.0),
+                p1: b.max.extend(0.0),
+            },
+            LeafShape::Cylinder(c) => Canonical {
+                kind: LeafKind::Cylinder,
+                node_from_local: axis_frame(c.a, c.b, c.radius as f64),
+                p0: z,
+                p1: z,
+            },
+            LeafShape::Cone(c) => {
+                let rmax = c.radius_a.max(c.radius_b);
+                Canonical {
+                    kind: LeafKind::Cone,
+                    node_from_local: axis_frame(c.a, c.b, rmax as f64),
+                    p0: Vec4::new(c.radius_a / rmax, c.radius_b / rmax, 0.0, 0.0),
+                    p1: z,
+                }
+            }
+            LeafShape::Torus(t) => {
+                let w = t.axis.as_dvec3().normalize();
+                let (u, v) = orthonormal_basis(w);
+                let r = t.major as f64;
+                Canonical {
+                    kind: LeafKind::Torus,
+                    node_from_local: DAffine3::from_mat3_translation(
+                        DMat3::from_cols(u * r, v * r, w * r),
+                        t.center.as_dvec3(),
+                    ),
+                    p0: Vec4::new(t.minor / t.major, 0.0, 0.0, 0.0),
+                    p1: z,
+                }
+            }
+            LeafShape::HalfSpace(h) => {
+                let l = h.normal.length();
+                Canonical {
+                    kind: LeafKind::HalfSpace,
+                    node_from_local: DAffine3::IDENTITY,
+                    p0: (h.normal / l).extend(h.offset / l),
+                    p1: z,
+                }
+            }
+        }
+    }
+}
+
+fn axis_frame(a: Vec3, b: Vec3, r: f64) -> DAffine3 {
+    let a = a.as_dvec3();
+    let ax = b.as_dvec3() - a;
+    let (u, v) = orthonormal_basis(ax.normalize());
+    DAffine3::from_mat3_translation(DMat3::from_cols(u * r, v * r, ax), a)
+}
+
+/// Half extents of the image of the unit disk in the local xy plane under `m`.
+fn disk_extent(m: &DMat3) -> DVec3 {
+    let u = m.x_axis;
+    let v = m.y_axis;
+    DVec3::new((u.x * u.x + v.x * v.x).sqrt(), (u.y * u.y + v.y * v.y).sqrt(), (u.z * u.z + v.z * v.z).sqrt())
+}
+
+/// World bounds of a canonical leaf under `world_from_local`.
+pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
+    let a = m.matrix3;
+    let t = m.translation;
+    let to = |lo: DVec3, hi: DVec3| Aabb::new(lo.as_vec3(), hi.as_vec3());
+    match c.kind {
+        LeafKind::Sphere => {
+            let e = DVec3::new(a.row(0).length(), a.row(1).length(), a.row(2).length());
+            to(t - e, t + e)
+        }
+        LeafKind::Cylinder | LeafKind::Cone => {
+            let e = disk_extent(&a);
+            let (ra, rb) = if c.kind == LeafKind::Cone { (c.p0.x as f64, c.p0.y as f64) } else { (1.0, 1.0) };
+            let t1 = t + a.z_axis;
+            to((t - e * ra).min(t1 - e * rb), (t + e * ra).max(t1 + e * rb))
+        }
+        LeafKind::Torus => {
+            let rho = c.p0.x as f64;
+            let e = disk_extent(&a) + DVec3::new(a.row(0).length(), a.row(1).length(), a.row(2).length()) * rho;
+            to(t - e, t + e)
+        }
+        LeafKind::Cuboid => {
+            let m32 = Affine3A::from_mat3_translation(a.as_mat3(), t.as_vec3());
+            Aabb::new(c.p0.truncate(), c.p1.truncate()).transformed(&m32)
+        }
+        LeafKind::HalfSpace => {
+            // Axis-aligned half-spaces are bounded on one side; others are not.
+            let n = a.inverse().transpose() * c.p0.truncate().as_dvec3();
+            let mut b = Aabb::INFINITE;
+            let nn = n.normalize();
+            for i in 0..3 {
+                if (nn[i].abs() - 1.0).abs() < 1e-12 {
+                    // plane through the image of offset * n_local
+                    let p = m.transform_point3(c.p0.truncate().as_dvec3() * c.p0.w as f64);
+                    if nn[i] > 0.0 { b.max[i] = p[i] as f32 } else { b.min[i] = p[i] as f32 }
+                }
+            }
+            b
+        }
+    }
+}
+
+/// Why a leaf could not be added to the table.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LeafError {
+    /// A field is out of range.
+    Shape(ShapeError),
+    /// The accumulated transform cannot be inverted (or is not finite).
+    SingularTransform,
+}
+
+/// The SoA table of every leaf of a baked scene. Leaf `i` is described by the
+/// `i`-th element of every column; the hot path matches once on `kind[i]`.
+#[derive(Clone, Debug, Default)]
+pub struct LeafTable {
+    /// Kind tag per leaf.
+    pub kind: Vec<LeafKind>,
+    /// World-to-local affine map per leaf (rays are mapped, not normalised).
+    pub to_local: Vec<Affine3A>,
+    /// Kind-specific parameters.
+    pub p0: Vec<Vec4>,
+    /// Kind-specific parameters.
+    pub p1: Vec<Vec4>,
+    /// World bounds per leaf.
+    pub bounds: Vec<Aabb>,
+}
+
+impl LeafTable {
+    /// Number of leaves.
+    pub fn len(&self) -> usize {
+        self.kind.len()
+    }
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.kind.is_empty()
+    }
+    /// Removes every leaf.
+    pub fn clear(&mut self) {
+        self.kind.clear();
+        self.to_local.clear();
+        self.p0.clear();
+        self.p1.clear();
+        self.bounds.clear();
+    }
+
+    /// Adds a leaf placed by `world_from_node`; returns its index.
+    pub fn push(&mut self, shape: &LeafShape, world_from_node: &DAffine3) -> Result<u32, LeafError> {
+        shape.validate().map_err(LeafError::Shape)?;
+        let c = shape.canonical();
+        let m = *world_from_node * c.node_from_local;
+        let det = m.matrix3.determinant();
+        if !(det.is_finite() && det.abs() > 1e-300) || !m.translation.is_finite() {
+            return Err(LeafError::SingularTransform);
+        }
+        let inv = m.inverse();
+        if !inv.matrix3.is_finite() || !inv.translation.is_finite() {
+            return Err(LeafError::SingularTransform);
+        }
+        let inv32 = Affine3A::from_mat3_translation(inv.matrix3.as_mat3(), inv.translation.as_vec3());
+        if !(inv32.matrix3.is_finite() && inv32.translation.is_finite()) {
+            return Err(LeafError::SingularTransform);
+        }
+        let bounds = canonical_bounds(&c, &m);
+        let i = self.kind.len() as u32;
+        self.kind.push(c.kind);
+        self.to_local.push(inv32);
+        self.p0.push(c.p0);
+        self.p1.push(c.p1);
+        self.bounds.push(bounds);
+        Ok(i)
+    }
+
+    /// Pushes the spans of leaf `i` along the ray `o + t d`, clipped to `[tmin, tmax]`,
+    /// into `out` (sorted, disjoint). Clipped ends carry [`Surf::NONE`].
+    #[inline]
+    pub fn spans<S: SpanSink + ?Sized>(&self, i: u32, o: Vec3, d: Vec3, tmin: f32, tmax: f32, out: &mut S) {
+        let iu = i as usize;
+        let m = &self.to_local[iu];
+        let lo = m.transform_point3(o);
+        let ld = m.transform_vector3(d);
+        let r = match self.kind[iu] {
+            LeafKind::Sphere => kernels::sphere(lo, ld),
+            LeafKind::Cuboid => kernels::cuboid(lo, ld, self.p0[iu].truncate(), self.p1[iu].truncate()),
+            LeafKind::Cylinder => kernels::cylinder(lo, ld),
+            LeafKind::Cone => kernels::cone(lo, ld, self.p0[iu].x, self.p0[iu].y),
+            LeafKind::HalfSpace => kernels::half_space(lo, ld, self.p0[iu].truncate(), self.p0[iu].w),
+            LeafKind::Torus => {
+                let mut buf = [(0.0f32, 0.0f32); 3];
+                let n = kernels::torus(lo, ld, self.p0[iu].x, &mut buf);
+                for &(a, b) in &buf[..n] {
+                    push_clipped(out, a, Surf::new(i, 0), b, Surf::new(i, 0), tmin, tmax);
+                }
+                return;
+            }
+        };
+        if let Some((t0, s0, t1, s1)) = r {
+            push_clipped(out, t0, Surf::new(i, s0), t1, Surf::new(i, s1), tmin, tmax);
+        }
+    }
+
+    /// Is the world point inside leaf `i` (boundary included)?
+    pub fn contains(&self, i: u32, p: Vec3) -> bool {
+        let iu = i as usize;
+        let l = self.to_local[iu].transform_point3(p);
+        let p0 = self.p0[iu];
+        match self.kind[iu] {
+            LeafKind::Sphere => l.length_squared() <= 1.0,
+            LeafKind::Cuboid => l.cmpge(p0.truncate()).all() && l.cmple(self.p1[iu].truncate()).all(),
+            LeafKind::Cylinder => l.x * l.x + l.y * l.y <= 1.0 && (0.0..=1.0).contains(&l.z),
+            LeafKind::Cone => {
+                let r = p0.x + (p0.y - p0.x) * l.z;
+                l.x * l.x + l.y * l.y <= r * r && (0.0..=1.0).contains(&l.z)
+            }
+            LeafKind::Torus => kernels::torus_contains(l.as_dvec3(), p0.x as f64),
+            LeafKind::HalfSpace => p0.truncate().dot(l) <= p0.w,
+        }
+    }
+
+    /// Outward unit normal (world space) of leaf `i` at parameter `t` of the ray, on
+    /// sub-surface `sub` (as reported with the crossing). Cold path: called once per
+    /// shown pixel.
+    pub fn normal(&self, i: u32, sub: u32, o: Vec3, d: Vec3, t: f32) -> Vec3 {
+        let iu = i as usize;
+        let m = &self.to_local[iu];
+        let l = m.transform_point3(o) + m.transform_vector3(d) * t;
+        let p0 = self.p0[iu];
+        let nl = match self.kind[iu] {
+            LeafKind::Sphere => l,
+            LeafKind::Cuboid => {
+                let mut n = Vec3::ZERO;
+                n[(sub / 2) as usize] = if sub % 2 == 1 { 1.0 } else { -1.0 };
+                n
+            }
+            LeafKind::Cylinder | LeafKind::Cone => match sub {
+                kernels::sub::CAP0 => Vec3::NEG_Z,
+                kernels::sub::CAP1 => Vec3::Z,
+                _ => {
+                    let (ra, rb) = if self.kind[iu] == LeafKind::Cone { (p0.x, p0.y) } else { (1.0, 1.0) };
+                    let r = ra + (rb - ra) * l.z;
+                    let xy = Vec3::new(l.x, l.y, 0.0).normalize_or(Vec3::X);
+                    // gradient of |xy| - r(z)
+                    xy - Vec3::Z * (rb - ra) * if r >= 0.0 { 1.0 } else { -1.0 }
+                }
+            },
+            LeafKind::Torus => {
+                let xy = Vec3::new(l.x, l.y, 0.0).normalize_or(Vec3::X);
+                l - xy
+            }
+            LeafKind::HalfSpace => p0.truncate(),
+        };
+        (m.matrix3.transpose() * glam::Vec3A::from(nl)).normalize_or(glam::Vec3A::Y).into()
+    }
+}
+
+/// Clips `[t0, t1]` to `[tmin, tmax]` and pushes it if it keeps a positive length.
+#[inline(always)]
+pub fn push_clipped<S: SpanSink + ?Sized>(out: &mut S, t0: f32, s0: Surf, t1: f32, s1: Surf, tmin: f32, tmax: f32) {
+    let (t0, s0) = if t0 < tmin { (tmin, Surf::NONE) } else { (t0, s0) };
+    let (t1, s1) = if t1 > tmax { (tmax, Surf::NONE) } else { (t1, s1) };
+    if t1 > t0 {
+        out.push_span(Span { t0, t1, s0, s1 });
+    }
+}
