@@ -1,0 +1,532 @@
+//! CSG programs: every solid of a scene flattened into one node array (children
+//! before parents), evaluated per ray without recursion (so a nesting depth of
+//! 10 000 is fine) with Roth's early outs and a BVH inside every wide node.
+
+use glam::Vec3;
+use rothray_primitives::{bvh::FlatBvh, Aabb, LeafTable, Span, Surf};
+
+use crate::spans::{combine_into, Op, SpanList};
+
+/// Nodes with more children than this get a BVH over their children.
+pub const WIDE_THRESHOLD: usize = 6;
+
+/// The kind of a program node (fieldless: the evaluator matches on it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum NodeKind {
+    /// A leaf solid (`first` is its index in the [`LeafTable`]).
+    Leaf,
+    /// n-ary union.
+    Union,
+    /// n-ary intersection.
+    Intersection,
+    /// First child minus all others.
+    Difference,
+}
+
+impl NodeKind {
+    fn op(self) -> Op {
+        match self {
+            NodeKind::Union => Op::Union,
+            NodeKind::Intersection => Op::Intersection,
+            _ => Op::Difference,
+        }
+    }
+}
+
+/// The BVH of a wide node: over its children (union) or its subtrahends (difference).
+#[derive(Clone, Debug, Default)]
+pub struct Wide {
+    /// BVH over the bounded children; primitive ids are positions in the node's child list.
+    pub bvh: FlatBvh,
+    /// Positions of children with unbounded boxes (always visited).
+    pub unbounded: Vec<u32>,
+}
+
+/// All CSG trees of a scene, SoA, children before parents.
+#[derive(Clone, Debug, Default)]
+pub struct Program {
+    /// Node kind.
+    pub kind: Vec<NodeKind>,
+    /// Leaf index (leaf) or first position in `children` (inner node).
+    pub first: Vec<u32>,
+    /// Child count (inner node).
+    pub count: Vec<u32>,
+    /// Index into `wides`, or `u32::MAX`.
+    pub wide: Vec<u32>,
+    /// Bounds per node (union: both; intersection: overlap; difference: the positive operand).
+    pub bounds: Vec<Aabb>,
+    /// Child node ids of the inner nodes.
+    pub children: Vec<u32>,
+    /// BVHs of wide nodes.
+    pub wides: Vec<Wide>,
+}
+
+/// Per-ray constants.
+#[derive(Clone, Copy, Debug)]
+pub struct RayCtx {
+    /// Origin.
+    pub o: Vec3,
+    /// Direction (not normalised; t is in its units).
+    pub d: Vec3,
+    /// `1 / d` per component.
+    pub inv_d: Vec3,
+    /// Fusing tolerance in units of t.
+    pub eps: f32,
+}
+
+impl RayCtx {
+    /// A ray context; `eps_world` is the scene's length tolerance.
+    #[inline]
+    pub fn new(o: Vec3, d: Vec3, eps_world: f32) -> Self {
+        RayCtx { o, d, inv_d: d.recip(), eps: eps_world / d.length() }
+    }
+}
+
+/// What a query wants from an evaluation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// The whole Roth diagram on `[tmin, tmax]`.
+    All,
+    /// Only the first surface: unions may shrink their range to the first entry
+    /// they have confirmed (the result is exact on the returned range).
+    Nearest,
+}
+
+struct Frame {
+    node: u32,
+    /// Next position in the child list (no BVH) or in the candidate list.
+    next: u32,
+    /// Candidate range in `Scratch::cand` (wide nodes), else 0..0.
+    cand_lo: u32,
+    cand_hi: u32,
+    tmin: f32,
+    tmax: f32,
+    /// The result is exact up to here (a nearest-mode union may stop early).
+    valid: f32,
+    /// Length of `Scratch::cand` when the frame was pushed.
+    cand_base: u32,
+    done: bool,
+    acc: SpanList,
+}
+
+/// Per-thread scratch memory, reused across rays (no allocation per ray once warm).
+#[derive(Default)]
+pub struct Scratch {
+    frames: Vec<Frame>,
+    cand: Vec<(u32, f32)>,
+    leaf: SpanList,
+    tmp: SpanList,
+    /// Result of the last evaluation.
+    pub out: SpanList,
+    /// Point-classification values (post-order).
+    bools: Vec<bool>,
+}
+
+/// Builds a [`Program`] bottom-up.
+pub struct ProgramBuilder<'a> {
+    /// The program being built.
+    pub program: Program,
+    leaves: &'a LeafTable,
+}
+
+impl<'a> ProgramBuilder<'a> {
+    /// A builder over the leaves of `leaves`.
+    pub fn new(leaves: &'a LeafTable) -> Self {
+        ProgramBuilder { program: Program::default(), leaves }
+    }
+
+    /// Adds a leaf node for leaf `leaf`.
+    pub fn leaf(&mut self, leaf: u32) -> u32 {
+        let p = &mut self.program;
+        let id = p.kind.len() as u32;
+        p.kind.push(NodeKind::Leaf);
+        p.first.push(leaf);
+        p.count.push(0);
+        p.wide.push(u32::MAX);
+        p.bounds.push(self.leaves.bounds[leaf as usize]);
+        id
+    }
+
+    /// Adds an inner node over already-added `children` (at least one). Nested
+    /// nodes of the same associative kind are flattened into this one (a union of
+    /// unions is one n-ary union; a difference whose first operand is a
+    /// difference absorbs it), which keeps programs shallow and BVHs wide.
+    pub fn op(&mut self, op: Op, children: &[u32]) -> u32 {
+        let kind = match op {
+            Op::Union => NodeKind::Union,
+            Op::Intersection => NodeKind::Intersection,
+            Op::Difference => NodeKind::Difference,
+        };
+        if children.len() == 1 {
+            return children[0];
+        }
+        let mut flat: Vec<u32> = Vec::with_capacity(children.len());
+        for (i, &c) in children.iter().enumerate() {
+            let p = &self.program;
+            let absorb = p.kind[c as usize] == kind && (kind != NodeKind::Difference || i == 0);
+            if absorb {
+                let (f, n) = (p.first[c as usize] as usize, p.count[c as usize] as usize);
+                flat.extend_from_slice(&p.children[f..f + n]);
+            } else {
+                flat.push(c);
+            }
+        }
+        let p = &mut self.program;
+        let bounds = match kind {
+            NodeKind::Union => flat.iter().fold(Aabb::EMPTY, |b, &c| b.union(&p.bounds[c as usize])),
+            NodeKind::Intersection => {
+                flat.iter().fold(Aabb::INFINITE, |b, &c| b.intersection(&p.bounds[c as usize]))
+            }
+            _ => p.bounds[flat[0] as usize],
+        };
+        let bounds = if bounds.is_empty() { Aabb::EMPTY } else { bounds };
+        let first = p.children.len() as u32;
+        p.children.extend_from_slice(&flat);
+        // A BVH for wide unions (all children) and wide differences (subtrahends).
+        let skip = if kind == NodeKind::Difference { 1 } else { 0 };
+        let mut wide = u32::MAX;
+        if kind != NodeKind::Intersection && flat.len() - skip > WIDE_THRESHOLD {
+            let mut boxes = Vec::new();
+            let mut ids = Vec::new();
+            let mut unbounded = Vec::new();
+            for (pos, &c) in flat.iter().enumerate().skip(skip) {
+                let b = p.bounds[c as usize];
+                if b.is_empty() {
+                    continue; // contributes nothing
+                }
+                if b.is_finite() {
+                    boxes.push(b);
+                    ids.push(pos as u32);
+                } else {
+                    unbounded.push(pos as u32);
+                }
+            }
+            let mut bvh = FlatBvh::build(&boxes, 2);
+            for x in bvh.prims.iter_mut() {
+                *x = ids[*x as usize];
+            }
+            wide = p.wides.len() as u32;
+            p.wides.push(Wide { bvh, unbounded });
+        }
+        let id = p.kind.len() as u32;
+        p.kind.push(kind);
+        p.first.push(first);
+        p.count.push(flat.len() as u32);
+        p.wide.push(wide);
+        p.bounds.push(bounds);
+        id
+    }
+
+    /// Finishes.
+    pub fn finish(self) -> Program {
+        self.program
+    }
+}
+
+impl Program {
+    /// Evaluates node `root` on the ray over `[tmin, tmax]`; the spans land in
+    /// `scratch.out`. Returns the parameter up to which the result is exact
+    /// (`tmax` unless [`Mode::Nearest`] let a union stop early).
+    pub fn eval(
+        &self,
+        leaves: &LeafTable,
+        root: u32,
+        ray: &RayCtx,
+        tmin: f32,
+        tmax: f32,
+        mode: Mode,
+        scratch: &mut Scratch,
+    ) -> f32 {
+        scratch.out.clear();
+        if self.kind[root as usize] == NodeKind::Leaf {
+            leaves.spans(self.first[root as usize], ray.o, ray.d, tmin, tmax, &mut scratch.out);
+            return tmax;
+        }
+        if self.bounds[root as usize].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
+            return tmax;
+        }
+        let base = scratch.frames.len();
+        self.push_frame(root, tmin, tmax, ray, scratch);
+        loop {
+            // Pick the next child of the top frame.
+            let top = scratch.frames.len() - 1;
+            let child = self.next_child(top, ray, scratch);
+            match child {
+                Some(c) => {
+                    let f = &scratch.frames[top];
+                    let (ct0, ct1) = (f.tmin, f.tmax);
+                    if self.kind[c as usize] == NodeKind::Leaf {
+                        let mut leaf = std::mem::take(&mut scratch.leaf);
+                        leaf.clear();
+                        leaves.spans(self.first[c as usize], ray.o, ray.d, ct0, ct1, &mut leaf);
+                        self.absorb(top, &leaf, ct1, ray, mode, scratch);
+                        scratch.leaf = leaf;
+                    } else {
+                        self.push_frame(c, ct0, ct1, ray, scratch);
+                    }
+                }
+                None => {
+                    let f = scratch.frames.pop().expect("frame");
+                    scratch.cand.truncate(f.cand_base as usize);
+                    if scratch.frames.len() == base {
+                        scratch.out = f.acc;
+                        return f.valid;
+                    }
+                    let parent = scratch.frames.len() - 1;
+                    self.absorb(parent, &f.acc, f.valid, ray, mode, scratch);
+                }
+            }
+        }
+    }
+
+    fn push_frame(&self, node: u32, tmin: f32, tmax: f32, ray: &RayCtx, scratch: &mut Scratch) {
+        let mut frame = Frame {
+            node,
+            next: 0,
+            cand_lo: 0,
+            cand_hi: 0,
+            tmin,
+            tmax,
+            valid: tmax,
+            cand_base: scratch.cand.len() as u32,
+            done: false,
+            acc: SpanList::new(),
+        };
+        let n = node as usize;
+        if self.bounds[n].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
+            frame.done = true;
+        } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX {
+            let lo = scratch.cand.len();
+            self.collect(n, 0, ray, tmin, tmax, scratch);
+            frame.cand_lo = lo as u32;
+            frame.cand_hi = scratch.cand.len() as u32;
+        }
+        scratch.frames.push(frame);
+    }
+
+    /// Candidates of wide node `n` (children at positions >= `skip`) along `[tmin, tmax]`,
+    /// sorted by box entry.
+    fn collect(&self, n: usize, skip: u32, ray: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) {
+        let w = &self.wides[self.wide[n] as usize];
+        let lo = scratch.cand.len();
+        let cand = &mut scratch.cand;
+        w.bvh.traverse(ray.o, ray.inv_d, tmin, tmax, |pos, _| {
+            let c = self.children[(self.first[n] + pos) as usize];
+            if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.o, ray.inv_d, tmin, tmax) {
+                cand.push((pos, t0));
+            }
+            tmax
+        });
+        for &pos in &w.unbounded {
+            if pos >= skip {
+                cand.push((pos, tmin));
+            }
+        }
+        let s = &mut cand[lo..];
+        if s.len() > 1 {
+            s.sort_unstable_by(|a, b| a.1.total_cmp(&b.1));
+        }
+    }
+
+    /// The next child node to evaluate for frame `top`, or `None` when it is finished.
+    fn next_child(&self, top: usize, ray: &RayCtx, scratch: &mut Scratch) -> Option<u32> {
+        let f = &scratch.frames[top];
+        if f.done {
+            return None;
+        }
+        let n = f.node as usize;
+        let kind = self.kind[n];
+        let (first, count) = (self.first[n], self.count[n]);
+        let wide = self.wide[n] != u32::MAX;
+        loop {
+            let f = &mut scratch.frames[top];
+            if (kind == NodeKind::Union && wide) || (kind == NodeKind::Difference && wide && f.next > 0) {
+                if kind == NodeKind::Difference && f.next == 1 {
+                    // Positive operand done: collect the subtrahends along its extent.
+                    f.next = 2;
+                    let (t0, t1) = (f.tmin, f.tmax);
+                    let lo = scratch.cand.len() as u32;
+                    self.collect(n, 1, ray, t0, t1, scratch);
+                    let f = &mut scratch.frames[top];
+                    f.cand_lo = lo;
+                    f.cand_hi = scratch.cand.len() as u32;
+                    continue;
+                }
+                if f.cand_lo >= f.cand_hi {
+                    return None;
+                }
+                let (pos, tenter) = scratch.cand[f.cand_lo as usize];
+                f.cand_lo += 1;
+                if tenter > f.tmax {
+                    // Sorted by entry: nothing further can matter.
+                    f.cand_lo = f.cand_hi;
+                    continue;
+                }
+                return Some(self.children[(first + pos) as usize]);
+            }
+            if f.next >= count || (kind == NodeKind::Difference && wide && f.next > 0) {
+                return None;
+            }
+            let c = self.children[(first + f.next) as usize];
+            f.next += 1;
+            if self.bounds[c as usize].ray_range(ray.o, ray.inv_d, f.tmin, f.tmax).is_none() {
+                // An empty child: the union skips it, the intersection is empty,
+                // the difference skips a subtrahend and ends on an empty positive.
+                match kind {
+                    NodeKind::Union => continue,
+                    NodeKind::Intersection => {
+                        f.acc.clear();
+                        f.done = true;
+                        return None;
+                    }
+                    _ => {
+                        if f.next == 1 {
+                            f.done = true;
+                            return None;
+                        }
+                        continue;
+                    }
+                }
+            }
+            return Some(c);
+        }
+    }
+
+    /// Folds a child's result into frame `top`.
+    fn absorb(&self, top: usize, r: &SpanList, r_valid: f32, ray: &RayCtx, mode: Mode, scratch: &mut Scratch) {
+        let Scratch { frames, tmp, .. } = scratch;
+        let f = &mut frames[top];
+        let kind = self.kind[f.node as usize];
+        if r_valid < f.valid {
+            f.valid = r_valid;
+            f.tmax = f.tmax.min(r_valid);
+            f.acc.truncate_at(r_valid);
+        }
+        let first = f.acc.is_empty() && is_first(f, kind, self.wide[f.node as usize] != u32::MAX);
+        if first {
+            f.acc.clear();
+            f.acc.0.extend_from_slice(r.as_slice());
+            f.acc.truncate_at(f.tmax);
+        } else {
+            combine_into(kind.op(), &mut f.acc, r.as_slice(), ray.eps, tmp);
+        }
+        match kind {
+            NodeKind::Union => {
+                if mode == Mode::Nearest {
+                    if let Some(s) = f.acc.as_slice().first() {
+                        if s.s0.is_real() && s.t0 < f.valid {
+                            f.valid = s.t0;
+                            f.tmax = f.tmax.min(s.t0);
+                            f.acc.truncate_at(s.t0);
+                        }
+                    }
+                }
+            }
+            NodeKind::Intersection | NodeKind::Difference => {
+                if f.acc.is_empty() {
+                    f.done = true;
+                } else {
+                    // Later operands only matter over the current extent.
+                    let s = f.acc.as_slice();
+                    f.tmin = f.tmin.max(s[0].t0);
+                    f.tmax = f.tmax.min(s[s.len() - 1].t1);
+                }
+            }
+            NodeKind::Leaf => {}
+        }
+    }
+
+    /// Classifies a point against node `root` (boundary counts as inside).
+    pub fn contains(&self, leaves: &LeafTable, root: u32, p: Vec3, scratch: &mut Scratch) -> bool {
+        // Post-order: a node's subtree occupies a contiguous id range ending at it,
+        // except for absorbed (flattened) nodes, which are simply never read.
+        let r = root as usize;
+        let lo = self.subtree_start(root) as usize;
+        scratch.bools.clear();
+        scratch.bools.resize(r - lo + 1, false);
+        for n in lo..=r {
+            let v = match self.kind[n] {
+                NodeKind::Leaf => leaves.contains(self.first[n], p),
+                k => {
+                    let (f, c) = (self.first[n] as usize, self.count[n] as usize);
+                    let ch = &self.children[f..f + c];
+                    if !self.bounds[n].contains(p) && self.bounds[n].is_finite() {
+                        false
+                    } else {
+                        match k {
+                            NodeKind::Union => ch.iter().any(|&c| scratch.bools[c as usize - lo]),
+                            NodeKind::Intersection => ch.iter().all(|&c| scratch.bools[c as usize - lo]),
+                            _ => {
+                                scratch.bools[ch[0] as usize - lo]
+                                    && !ch[1..].iter().any(|&c| scratch.bools[c as usize - lo])
+                            }
+                        }
+                    }
+                }
+            };
+            scratch.bools[n - lo] = v;
+        }
+        scratch.bools[r - lo]
+    }
+
+    /// Smallest node id in the subtree of `root` (iterative).
+    pub fn subtree_start(&self, root: u32) -> u32 {
+        let mut lo = root;
+        let mut stack = vec![root];
+        while let Some(n) = stack.pop() {
+            lo = lo.min(n);
+            if self.kind[n as usize] != NodeKind::Leaf {
+                let (f, c) = (self.first[n as usize] as usize, self.count[n as usize] as usize);
+                stack.extend_from_slice(&self.children[f..f + c]);
+            }
+        }
+        lo
+    }
+
+    /// The leaves of node `root` (iterative walk).
+    pub fn leaves_of(&self, root: u32) -> Vec<u32> {
+        let mut out = Vec::new();
+        let mut stack = vec![root];
+        while let Some(n) = stack.pop() {
+            if self.kind[n as usize] == NodeKind::Leaf {
+                out.push(self.first[n as usize]);
+            } else {
+                let (f, c) = (self.first[n as usize] as usize, self.count[n as usize] as usize);
+                stack.extend_from_slice(&self.children[f..f + c]);
+            }
+        }
+        out
+    }
+}
+
+#[inline(always)]
+fn is_first(f: &Frame, kind: NodeKind, wide: bool) -> bool {
+    // The first operand of an intersection/difference initialises the accumulator;
+    // for a union an empty accumulator is the identity anyway.
+    match kind {
+        NodeKind::Union => true,
+        NodeKind::Intersection | NodeKind::Difference => {
+            if wide && kind == NodeKind::Difference {
+                f.next == 1
+            } else {
+                f.next == 1
+            }
+        }
+        NodeKind::Leaf => true,
+    }
+}
+
+/// The first real surface of a span list within `[tmin, valid]`: the nearest-hit
+/// answer. Returns `(t, surface)`.
+#[inline]
+pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
+    let s = spans.first()?;
+    if s.s0.is_real() {
+        Some((s.t0, s.s0))
+    } else if s.s1.is_real() {
+        Some((s.t1, s.s1))
+    } else {
+        None
+    }
+}

@@ -1,0 +1,219 @@
+//! Interval lists (Roth diagrams) and the Table-1 combine with regularisation.
+
+use rothray_primitives::{Span, SpanSink, Surf};
+use smallvec::SmallVec;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Inline capacity of a [`SpanList`]: enough for every analytic leaf and for most
+/// CSG results; longer lists spill to the heap (counted by [`spill_count`]).
+pub const INLINE_SPANS: usize = 8;
+
+static SPILLS: AtomicU64 = AtomicU64::new(0);
+
+/// How many span lists have spilled to the heap since the process started.
+pub fn spill_count() -> u64 {
+    SPILLS.load(Ordering::Relaxed)
+}
+
+/// A sorted list of disjoint spans with inline storage (no heap per ray).
+#[derive(Clone, Debug, Default)]
+pub struct SpanList(pub SmallVec<[Span; INLINE_SPANS]>);
+
+impl SpanList {
+    /// An empty list.
+    #[inline(always)]
+    pub fn new() -> Self {
+        SpanList(SmallVec::new())
+    }
+    /// Appends (keeping order is the caller's job).
+    #[inline(always)]
+    pub fn push(&mut self, s: Span) {
+        if self.0.len() == INLINE_SPANS {
+            SPILLS.fetch_add(1, Ordering::Relaxed);
+        }
+        self.0.push(s);
+    }
+    /// Removes every span.
+    #[inline(always)]
+    pub fn clear(&mut self) {
+        self.0.clear()
+    }
+    /// Number of spans.
+    #[inline(always)]
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+    /// True when the ray is inside nowhere.
+    #[inline(always)]
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+    /// The spans.
+    #[inline(always)]
+    pub fn as_slice(&self) -> &[Span] {
+        &self.0
+    }
+    /// Clips every span to `t <= tmax` (clipped ends lose their surface).
+    pub fn truncate_at(&mut self, tmax: f32) {
+        while let Some(last) = self.0.last_mut() {
+            if last.t0 >= tmax {
+                self.0.pop();
+            } else {
+                if last.t1 > tmax {
+                    last.t1 = tmax;
+                    last.s1 = Surf::NONE;
+                }
+                break;
+            }
+        }
+    }
+}
+
+impl SpanSink for SpanList {
+    #[inline(always)]
+    fn push_span(&mut self, s: Span) {
+        self.push(s)
+    }
+}
+
+/// A boolean operation of Table 1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum Op {
+    /// Inside either.
+    Union,
+    /// Inside both.
+    Intersection,
+    /// Inside the first, not the second.
+    Difference,
+}
+
+impl Op {
+    /// Table 1 on one point: is the result inside, given inside-ness of the operands?
+    #[inline(always)]
+    pub fn apply(self, a: bool, b: bool) -> bool {
+        match self {
+            Op::Union => a | b,
+            Op::Intersection => a & b,
+            Op::Difference => a & !b,
+        }
+    }
+}
+
+#[inline(always)]
+fn event(l: &[Span], k: usize) -> (f32, Surf) {
+    let s = &l[k >> 1];
+    if k & 1 == 0 { (s.t0, s.s0) } else { (s.t1, s.s1) }
+}
+
+/// Combines two span lists by `op` into `out` (cleared first), regularised:
+///
+/// * boundaries of `a` and `b` closer than `eps` are fused into one event at `a`'s
+///   parameter (so coincident faces of different operands never leave slivers
+///   or speckle; when both change the result at once, `a`'s surface wins, so the
+///   choice is the same on every pixel);
+/// * spans shorter than `eps` are dropped and spans closer than `eps` are merged;
+/// * surfaces of `b` that bound a difference are flipped.
+pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
+    out.clear();
+    // Fast paths: nothing to merge.
+    match op {
+        Op::Union => {
+            if b.is_empty() {
+                out.0.extend_from_slice(a);
+                return;
+            }
+            if a.is_empty() {
+                out.0.extend_from_slice(b);
+                return;
+            }
+        }
+        Op::Intersection => {
+            if a.is_empty() || b.is_empty() {
+                return;
+            }
+        }
+        Op::Difference => {
+            if a.is_empty() {
+                return;
+            }
+            if b.is_empty() {
+                out.0.extend_from_slice(a);
+                return;
+            }
+        }
+    }
+    let na = a.len() * 2;
+    let nb = b.len() * 2;
+    let (mut ia, mut ib) = (0usize, 0usize);
+    let (mut ina, mut inb, mut inr) = (false, false, false);
+    let mut start = (0.0f32, Surf::NONE);
+    let flip_b = op == Op::Difference;
+    while ia < na || ib < nb {
+        let (ta, sa) = if ia < na { event(a, ia) } else { (f32::INFINITY, Surf::NONE) };
+        let (tb, sb) = if ib < nb { event(b, ib) } else { (f32::INFINITY, Surf::NONE) };
+        let sb = if flip_b { sb.flip() } else { sb };
+        let (t, surf);
+        if ia < na && ib < nb && (ta - tb).abs() <= eps {
+            ina = !ina;
+            inb = !inb;
+            ia += 1;
+            ib += 1;
+            t = ta;
+            surf = if sa.is_real() || !sb.is_real() { sa } else { sb };
+        } else if ta < tb {
+            ina = !ina;
+            ia += 1;
+            t = ta;
+            surf = sa;
+        } else {
+            inb = !inb;
+            ib += 1;
+            t = tb;
+            surf = sb;
+        }
+        let r = op.apply(ina, inb);
+        if r == inr {
+            continue;
+        }
+        inr = r;
+        if r {
+            // Entering: merge with the previous span when the gap is below eps.
+            if let Some(last) = out.0.last() {
+                if t - last.t1 <= eps {
+                    start = (last.t0, last.s0);
+                    out.0.pop();
+                    continue;
+                }
+            }
+            start = (t, surf);
+        } else if t - start.0 > eps {
+            out.push(Span { t0: start.0, t1: t, s0: start.1, s1: surf });
+        }
+    }
+}
+
+/// In-place `acc = acc op b` using `tmp` as scratch.
+#[inline]
+pub fn combine_into(op: Op, acc: &mut SpanList, b: &[Span], eps: f32, tmp: &mut SpanList) {
+    combine(op, acc.as_slice(), b, eps, tmp);
+    std::mem::swap(acc, tmp);
+}
+
+/// Regularises one list on its own: drops spans shorter than `eps`, merges spans
+/// closer than `eps`.
+pub fn regularise(l: &mut SpanList, eps: f32) {
+    let mut out: SmallVec<[Span; INLINE_SPANS]> = SmallVec::new();
+    for s in l.0.iter() {
+        if let Some(last) = out.last_mut() {
+            if s.t0 - last.t1 <= eps {
+                last.t1 = s.t1;
+                last.s1 = s.s1;
+                continue;
+            }
+        }
+        out.push(*s);
+    }
+    out.retain(|s| s.t1 - s.t0 > eps);
+    l.0 = out;
+}
