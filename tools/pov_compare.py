@@ -248,14 +248,15 @@ def edge_mask(lab, W, H, conn):
 
 
 def compare(scene, rothray_png, W, H, keep, diff_path, max_mismatch, band,
-            sturm, threads):
+            sturm, threads, inflate=0.0):
     rw, rh, rrows = read_png(rothray_png)
     if W is None:
         W, H = rw, rh
     if (rw, rh) != (W, H):
         raise RuntimeError("%s is %dx%d, expected %dx%d"
                            % (rothray_png, rw, rh, W, H))
-    pov_png, leaves, argv = render_id(scene, W, H, keep, sturm, threads)
+    pov_png, leaves, argv = render_id(scene, W, H, keep, sturm, threads,
+                                      inflate)
     pw, ph, prows = read_png(pov_png)
     pal = Palette(len(leaves))
     lp = labels_of(prows, W, H, pal)
@@ -318,12 +319,13 @@ def workdir(keep):
     return tempfile.mkdtemp(prefix="pov_compare_"), True
 
 
-def render_id(scene, W, H, keep, sturm, threads):
+def render_id(scene, W, H, keep, sturm, threads, inflate=0.0):
     d, _ = workdir(keep)
     base = os.path.splitext(os.path.basename(scene))[0]
     pov = os.path.join(d, base + "_id.pov")
     png = os.path.join(d, base + "_pov_id.png")
-    W, H, leaves = scene2pov.convert_file(scene, pov, True, W, H, sturm)
+    W, H, leaves = scene2pov.convert_file(scene, pov, True, W, H, sturm,
+                                          inflate)
     argv, _ = run_povray(pov, png, W, H, ID_OPTS, threads)
     print("povray: (cwd %s) %s" % (d, " ".join(argv)))
     return png, leaves, argv
@@ -344,6 +346,9 @@ def main(argv):
     ap.add_argument("--sturm", action="store_true",
                     help="POV sturm solver for tori")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--inflate-cuts", type=float, default=0.0, metavar="EPS",
+                    help="grow subtracted leaves by EPS so POV-Ray gets "
+                    "differences with coincident faces right (e.g. 1e-4)")
     ap.add_argument("--pov-only", action="store_true",
                     help="only render POV's id image (use with --keep)")
     ap.add_argument("--time-only", action="store_true",
@@ -369,17 +374,20 @@ def main(argv):
                 sys.stderr.write(err[-3000:])
                 raise RuntimeError("no 'Trace Time' in povray's output")
             print("povray: (cwd %s) %s" % (d, " ".join(cmd)))
+            m = re.search(r"Trace Time:[^\n]*\n\s*using (\d+) thread\(s\) "
+                          r"with ([0-9.]+) CPU-seconds", err)
+            cpu = "threads=%s cpu_s=%s " % m.groups() if m else ""
             print("pov_time %s %dx%d leaves=%d parse_s=%s bounding_s=%s "
-                  "trace_s=%.3f  (%s)" % (os.path.basename(a.scene), W, H,
-                                         len(leaves), p, b, t,
-                                         povray_version()))
+                  "%strace_s=%.3f  (%s)" % (os.path.basename(a.scene), W, H,
+                                           len(leaves), p, b, cpu, t,
+                                           povray_version()))
             print(t)
             return 0
         if a.pov_only:
             if not a.keep:
                 ap.error("--pov-only needs --keep DIR")
             png, leaves, _ = render_id(a.scene, a.width, a.height, a.keep,
-                                       a.sturm, a.threads)
+                                       a.sturm, a.threads, a.inflate_cuts)
             print("pov id image: %s (%d leaves)" % (png, len(leaves)))
             return 0
         if not a.rothray_id:
@@ -388,7 +396,7 @@ def main(argv):
             tmp = tempfile.mkdtemp(prefix="pov_compare_")
         return compare(a.scene, a.rothray_id, a.width, a.height,
                        a.keep or tmp, a.diff, a.max_mismatch, a.band,
-                       a.sturm, a.threads)
+                       a.sturm, a.threads, a.inflate_cuts)
     except scene2pov.Unsupported as e:
         print("pov_compare: SKIP (unsupported by POV-Ray): %s" % e)
         return 3

@@ -145,13 +145,15 @@ def load_obj(path):
 
 # ----------------------------------------------------------------- emitter
 class Converter:
-    def __init__(self, scene, scene_dir, id_mode, sturm=False):
+    def __init__(self, scene, scene_dir, id_mode, sturm=False, inflate=0.0):
         self.scene = scene
+        self.inflate = inflate
         self.dir = scene_dir
         self.id_mode = id_mode
         self.sturm = sturm
         self.leaf_count = 0
         self.leaf_paths = []        # JSON path of leaf i
+        self.notes = []
         self.out = []
 
     def texture(self, color):
@@ -190,7 +192,12 @@ class Converter:
             return s + pad + "  " + pov_matrix(M) + "\n" + pad + "}\n"
         if kind not in LEAVES:
             raise BadScene("%s: unknown shape kind %r" % (path, kind))
-        body = self.leaf(kind, v, p, pad)
+        try:
+            body = self.leaf(kind, v, p, pad)
+        except KeyError as e:
+            raise BadScene("%s.%s: missing field" % (p, e.args[0]))
+        except (TypeError, IndexError, ValueError) as e:
+            raise BadScene("%s: malformed (%s)" % (p, e))
         tex = self.texture(color)
         self.leaf_paths.append(p)
         self.leaf_count += 1
@@ -228,11 +235,13 @@ class Converter:
             n = v["normal"]
             if dot(n, n) == 0:
                 raise BadScene("%s.normal: zero" % p)
-            # POV: plane { N, D } is dot(N/|N|, p) = D/|N| ... POV divides
-            # D by |N| when it normalises N, so {N, D} <=> dot(N, p) = D,
-            # interior dot(N, p) < D: the contract's half-space.
-            return "%splane { %s, %s @TEX@ }\n" % (pad, vec(n),
-                                                   fmt(v["offset"]))
+            # POV: plane { N, D } is the surface dot(N/|N|, p) = D (POV
+            # normalises N but does NOT rescale D; verified), interior
+            # dot(N, p) < D (the side opposite the normal): the contract's
+            # half-space once N is unit and D = offset/|N|.
+            ln = math.sqrt(dot(n, n))
+            return "%splane { %s, %s @TEX@ }\n" % (
+                pad, vec(mul(n, 1 / ln)), fmt(float(v["offset"]) / ln))
         if kind == "swept_sphere":
             return self.sweep(v, p, pad)
         if kind == "mesh":
@@ -343,10 +352,70 @@ class Converter:
         for i, o in enumerate(sc["objects"]):
             color = o.get("color", DEFAULT_COLOR)
             body.append("// objects[%d] %s\n" % (i, o.get("name", "")))
-            body.append(self.shape(o["shape"], color, "objects[%d].shape" % i,
-                                   0))
+            shp = o["shape"]
+            if self.inflate:
+                shp = inflate_cuts(shp, self.inflate, False, self.notes)
+            body.append(self.shape(shp, color, "objects[%d].shape" % i, 0))
+        if self.notes:
+            hdr.append("// --inflate-cuts not applied to: %s\n"
+                       % ", ".join(sorted(set(self.notes))))
         hdr.append("// %d leaves\n" % self.leaf_count)
         return "".join(hdr + body)
+
+
+def inflate_cuts(node, eps, neg, notes):
+    """Copy of `node` in which every leaf that is subtracted (an odd number
+    of times: difference operands after the first) is grown outward by about
+    eps in its own coordinates. POV-Ray leaves coincident faces of A - B
+    (e.g. a notch cut by a box sharing faces with A) speckled or filled;
+    growing B by eps gives the regularised result. Meshes are left alone."""
+    kinds = [k for k in node if k not in ("name", "color")]
+    if len(kinds) != 1:
+        return node
+    k = kinds[0]
+    v = node[k]
+    out = dict(node)
+    if k in ("union", "intersection"):
+        out[k] = [inflate_cuts(c, eps, neg, notes) for c in v]
+        return out
+    if k == "difference":
+        out[k] = [inflate_cuts(c, eps, neg if i == 0 else not neg, notes)
+                  for i, c in enumerate(v)]
+        return out
+    if k == "transformed":
+        t = dict(v)
+        t["shape"] = inflate_cuts(v["shape"], eps, neg, notes)
+        out[k] = t
+        return out
+    if not neg:
+        return node
+    v = dict(v)
+    if k == "sphere":
+        v["radius"] = v["radius"] + eps
+    elif k == "box":
+        v["min"] = [c - eps for c in v["min"]]
+        v["max"] = [c + eps for c in v["max"]]
+    elif k in ("cylinder", "cone"):
+        d = norm(sub(v["b"], v["a"]))
+        v["a"] = sub(v["a"], mul(d, eps))
+        v["b"] = add(v["b"], mul(d, eps))
+        for r in ("radius", "radius_a", "radius_b"):
+            if r in v and v[r] > 0:
+                v[r] = v[r] + eps
+        if k == "cone" and (v["radius_a"] == 0 or v["radius_b"] == 0):
+            notes.append("cone tips")
+    elif k == "torus":
+        v["minor"] = v["minor"] + eps
+    elif k == "plane":
+        v["offset"] = v["offset"] + eps * math.sqrt(dot(v["normal"],
+                                                        v["normal"]))
+    elif k == "swept_sphere":
+        v["bezier"] = [list(q[:3]) + [q[3] + eps] for q in v["bezier"]]
+    else:
+        notes.append(k)
+        return node
+    out[k] = v
+    return out
 
 
 def image_size(scene, width=None, height=None):
@@ -357,7 +426,7 @@ def image_size(scene, width=None, height=None):
 
 
 def convert_file(scene_path, out_path, id_mode=False, width=None, height=None,
-                 sturm=False):
+                 sturm=False, inflate=0.0):
     """Returns (W, H, leaf_paths). Raises BadScene / Unsupported."""
     try:
         with open(scene_path) as f:
@@ -366,9 +435,13 @@ def convert_file(scene_path, out_path, id_mode=False, width=None, height=None,
         raise BadScene("%s: %s" % (scene_path, e))
     W, H = image_size(scene, width, height)
     conv = Converter(scene, os.path.dirname(os.path.abspath(scene_path)),
-                     id_mode, sturm)
+                     id_mode, sturm, inflate)
     try:
         text = conv.convert(W, H)
+    except BadScene as e:
+        raise BadScene("%s: %s" % (scene_path, e))
+    except Unsupported as e:
+        raise Unsupported("%s: %s" % (scene_path, e))
     except (KeyError, TypeError, IndexError, ValueError) as e:
         raise BadScene("%s: malformed scene (%s: %s)"
                        % (scene_path, type(e).__name__, e))
@@ -388,12 +461,15 @@ def main(argv):
     ap.add_argument("--height", type=int)
     ap.add_argument("--sturm", action="store_true",
                     help="use POV's sturm root solver for tori")
+    ap.add_argument("--inflate-cuts", type=float, default=0.0, metavar="EPS",
+                    help="grow subtracted leaves by EPS (fixes POV-Ray's "
+                    "handling of coincident faces in differences)")
     a = ap.parse_args(argv)
     try:
         W, H, leaves = convert_file(a.scene, a.out, a.id, a.width, a.height,
-                                    a.sturm)
+                                    a.sturm, a.inflate_cuts)
     except Unsupported as e:
-        print("scene2pov: unsupported: %s: %s" % (a.scene, e), file=sys.stderr)
+        print("scene2pov: unsupported: %s" % e, file=sys.stderr)
         return 3
     except BadScene as e:
         print("scene2pov: error: %s" % e, file=sys.stderr)

@@ -1,1 +1,39 @@
-// placeholder
+//! # rothray-engine: components, systems, the baked scene, queries, rendering
+//!
+//! A tool owns a `hecs::World`; rothray's [`components`] sit on its entities
+//! (a [`Transform`], one shape component per leaf kind, [`CsgNode`],
+//! [`Material`], [`Name`]). The systems are plain functions:
+//! [`find_objects`] → [`bake_scene`] (or [`sync_scene`], which skips the bake
+//! when nothing changed). The baked [`RenderScene`] holds only tables (SoA
+//! leaves in pre-order, the flat CSG program, BVHs) and answers queries on one
+//! ray or bundles: nearest hit, any hit, Roth spans per object, point
+//! classification. [`render()`] draws a picture in parallel tiles with rayon.
+//!
+//! ```
+//! use rothray_engine::*;
+//! use glam::Vec3;
+//! let mut world = hecs::World::new();
+//! let a = world.spawn((Transform::default(), Cuboid { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) }));
+//! let b = world.spawn((Transform::default(), Sphere { center: Vec3::ZERO, radius: 1.2 }));
+//! let cut = world.spawn((CsgNode::difference([a, b]), Name::new("cut")));
+//! let mut scene = RenderScene::default();
+//! sync_scene(&mut world, &mut scene).unwrap();
+//! let hit = scene.intersect(&Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z));
+//! // The ray goes down the hole the sphere cut through the box's face: it
+//! // sees nothing until the corner regions... and here exits through the back.
+//! assert!(hit.is_none());
+//! assert!(scene.contains_entity(Vec3::new(0.95, 0.95, 0.95), cut));
+//! ```
+#![warn(missing_docs)]
+
+pub mod components;
+pub mod render;
+pub mod scene;
+
+pub use components::*;
+pub use render::{leaf_id_color, render, Aov, Camera, CameraRays, Light, RenderSettings, RenderStats};
+pub use scene::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError, Hit, LeafInfo, ObjectInfo, Ray, RenderScene};
+pub use glam;
+pub use hecs;
+pub use rothray_csg as csg;
+pub use rothray_primitives as primitives;

@@ -1,0 +1,253 @@
+//! Pinhole camera, Lambert shading with shadow rays, AOVs, parallel tiles.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use glam::Vec3;
+use rayon::prelude::*;
+use rothray_csg::Scratch;
+
+use crate::scene::{Hit, Ray, RenderScene};
+
+/// Pinhole camera of the scene format.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye point.
+    pub eye: Vec3,
+    /// Point looked at (the image centre).
+    pub target: Vec3,
+    /// Up hint.
+    pub up: Vec3,
+    /// Full vertical field of view, degrees.
+    pub fov_y_deg: f32,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera { eye: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 40.0 }
+    }
+}
+
+/// A camera prepared for one image size.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRays {
+    eye: Vec3,
+    fwd: Vec3,
+    right: Vec3,
+    up: Vec3,
+    w: f32,
+    h: f32,
+}
+
+impl Camera {
+    /// Prepares ray generation for a `width` x `height` image.
+    pub fn rays(&self, width: u32, height: u32) -> CameraRays {
+        let fwd = (self.target - self.eye).normalize_or(Vec3::NEG_Z);
+        let mut right = fwd.cross(self.up);
+        if right.length_squared() < 1e-12 {
+            right = fwd.any_orthonormal_vector();
+        }
+        let right = right.normalize();
+        let up = right.cross(fwd);
+        let th = (self.fov_y_deg.to_radians() * 0.5).tan();
+        let aspect = width as f32 / height as f32;
+        CameraRays { eye: self.eye, fwd, right: right * th * aspect, up: up * th, w: width as f32, h: height as f32 }
+    }
+}
+
+impl CameraRays {
+    /// The ray through image point `(x, y)` in pixels (y down; pixel centres at +0.5).
+    /// Its direction is unit length, so t is a distance.
+    #[inline]
+    pub fn ray(&self, x: f32, y: f32) -> Ray {
+        let u = 2.0 * x / self.w - 1.0;
+        let v = 1.0 - 2.0 * y / self.h;
+        Ray::new(self.eye, (self.fwd + self.right * u + self.up * v).normalize())
+    }
+}
+
+/// A directional light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    /// The way the light travels.
+    pub direction: Vec3,
+    /// Linear RGB.
+    pub color: Vec3,
+}
+
+/// Which picture to make.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Aov {
+    /// Lambert shading with shadows.
+    Shaded,
+    /// Distance along the (unit) camera ray: white near, black far (8-bit grey, scaled to the image's range).
+    Depth,
+    /// World normal mapped as `0.5 + 0.5 n`.
+    Normal,
+    /// A flat colour per leaf ([`leaf_id_color`]).
+    Id,
+}
+
+/// Render settings.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Samples per pixel (1: the pixel centre; more: jittered, averaged).
+    pub spp: u32,
+    /// Picture kind.
+    pub aov: Aov,
+    /// Background (linear RGB).
+    pub background: Vec3,
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// Ambient term.
+    pub ambient: f32,
+}
+
+/// The flat colour of leaf `i` in the `id` AOV (shared with `tools/scene2pov.py`):
+/// `h = (i + 1) * 2654435761 mod 2^32`, colour = bytes 3, 2, 1 of h.
+pub fn leaf_id_color(i: u32) -> [u8; 3] {
+    let h = (i.wrapping_add(1)).wrapping_mul(2654435761);
+    [(h >> 24) as u8, (h >> 16) as u8, (h >> 8) as u8]
+}
+
+fn srgb(x: f32) -> u8 {
+    let x = x.clamp(0.0, 1.0);
+    let s = if x <= 0.0031308 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// Counters of a render.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RenderStats {
+    /// Camera rays traced.
+    pub primary_rays: u64,
+    /// Shadow rays traced.
+    pub shadow_rays: u64,
+}
+
+#[inline]
+fn hash2(a: u32, b: u32) -> u32 {
+    let mut h = a.wrapping_mul(0x9E37_79B1) ^ b.wrapping_mul(0x85EB_CA77);
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x2C1B_3C6D);
+    h ^= h >> 12;
+    h = h.wrapping_mul(0x297A_2D39);
+    h ^ (h >> 15)
+}
+
+struct Sample {
+    rgb: Vec3,
+    depth: f32,
+}
+
+fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, scratch: &mut Scratch, shadows: &mut u64) -> Sample {
+    let Some(h) = hit else {
+        return Sample { rgb: s.background, depth: f32::INFINITY };
+    };
+    // Face the viewer (a ray that starts inside a solid sees its inner side).
+    let n = if h.normal.dot(ray.dir) > 0.0 { -h.normal } else { h.normal };
+    let rgb = match s.aov {
+        Aov::Id => {
+            let c = leaf_id_color(h.leaf);
+            Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0
+        }
+        Aov::Normal => h.normal * 0.5 + 0.5,
+        Aov::Depth => Vec3::ZERO,
+        Aov::Shaded => {
+            let base = scene.leaf_info[h.leaf as usize].color;
+            let p = ray.origin + ray.dir * h.t;
+            let mut acc = Vec3::splat(s.ambient);
+            let off = (scene.eps * 20.0).max(1e-4 * (1.0 + p.abs().max_element()));
+            for l in &s.lights {
+                let to_l = -l.direction.normalize_or_zero();
+                let c = n.dot(to_l);
+                if c <= 0.0 {
+                    continue;
+                }
+                *shadows += 1;
+                let sr = Ray { origin: p + n * off, dir: to_l, tmin: 0.0, tmax: f32::INFINITY };
+                if !scene.occluded_with(&sr, scratch) {
+                    acc += l.color * c;
+                }
+            }
+            base * acc
+        }
+    };
+    Sample { rgb, depth: h.t }
+}
+
+/// Renders into an RGB8 buffer (`width * height * 3`, rows top to bottom).
+/// `progress(done_rows, total_rows)` is called as rows finish (from any thread).
+pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &(dyn Fn(usize, usize) + Sync)) -> (Vec<u8>, RenderStats) {
+    let (w, h) = (s.width as usize, s.height as usize);
+    let rays = cam.rays(s.width, s.height);
+    let spp = s.spp.max(1);
+    let mut lin = vec![Vec3::ZERO; w * h];
+    let mut depth = vec![f32::INFINITY; w * h];
+    let done = AtomicUsize::new(0);
+    const ROWS: usize = 4;
+    let shadow_total = AtomicUsize::new(0);
+    lin.par_chunks_mut(w * ROWS).zip(depth.par_chunks_mut(w * ROWS)).enumerate().for_each_init(
+        Scratch::default,
+        |scratch, (chunk, (lrows, drows))| {
+            let mut shadows = 0u64;
+            for (k, (px, dp)) in lrows.iter_mut().zip(drows.iter_mut()).enumerate() {
+                let y = chunk * ROWS + k / w;
+                let x = k % w;
+                let mut acc = Vec3::ZERO;
+                let mut dmin = f32::INFINITY;
+                for si in 0..spp {
+                    let (jx, jy) = if spp == 1 {
+                        (0.5, 0.5)
+                    } else {
+                        let r = hash2((y * w + x) as u32, si);
+                        ((r & 0xffff) as f32 / 65536.0, (r >> 16) as f32 / 65536.0)
+                    };
+                    let ray = rays.ray(x as f32 + jx, y as f32 + jy);
+                    let hit = scene.intersect_with(&ray, scratch);
+                    let smp = shade(scene, s, &ray, hit, scratch, &mut shadows);
+                    acc += smp.rgb;
+                    dmin = dmin.min(smp.depth);
+                }
+                *px = acc / spp as f32;
+                *dp = dmin;
+            }
+            shadow_total.fetch_add(shadows as usize, Ordering::Relaxed);
+            let d = done.fetch_add(lrows.len() / w, Ordering::Relaxed) + lrows.len() / w;
+            progress(d, h);
+        },
+    );
+    let mut out = vec![0u8; w * h * 3];
+    match s.aov {
+        Aov::Depth => {
+            let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
+            for &d in &depth {
+                if d.is_finite() {
+                    lo = lo.min(d);
+                    hi = hi.max(d);
+                }
+            }
+            let span = (hi - lo).max(1e-6);
+            for (i, &d) in depth.iter().enumerate() {
+                let g = if d.is_finite() { (255.0 * (1.0 - 0.85 * (d - lo) / span)) as u8 } else { 0 };
+                out[i * 3..i * 3 + 3].copy_from_slice(&[g, g, g]);
+            }
+        }
+        Aov::Id | Aov::Normal => {
+            for (i, c) in lin.iter().enumerate() {
+                let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+                out[i * 3..i * 3 + 3].copy_from_slice(&[q(c.x), q(c.y), q(c.z)]);
+            }
+        }
+        Aov::Shaded => {
+            for (i, c) in lin.iter().enumerate() {
+                out[i * 3..i * 3 + 3].copy_from_slice(&[srgb(c.x), srgb(c.y), srgb(c.z)]);
+            }
+        }
+    }
+    let stats = RenderStats { primary_rays: (w * h) as u64 * spp as u64, shadow_rays: shadow_total.into_inner() as u64 };
+    (out, stats)
+}

@@ -1,0 +1,564 @@
+//! The baked render scene (plain tables, no `Entity` in the hot path), the bake
+//! systems that fill it from a `hecs::World`, and the queries it answers.
+
+use std::cell::RefCell;
+
+use glam::{DAffine3, Vec3};
+use hecs::{Entity, World};
+use rothray_csg::{first_surface, Mode, Program, ProgramBuilder, RayCtx, Scratch};
+use rothray_primitives::{bvh::FlatBvh, Aabb, LeafError, LeafShape, LeafTable, Span, Surf};
+
+use crate::components::*;
+
+/// A ray `origin + t * dir`, `t` in `[tmin, tmax]` (t is in units of `dir`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Origin.
+    pub origin: Vec3,
+    /// Direction (need not be unit length).
+    pub dir: Vec3,
+    /// Smallest t.
+    pub tmin: f32,
+    /// Largest t.
+    pub tmax: f32,
+}
+
+impl Ray {
+    /// A ray over `[0, inf)`.
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Ray { origin, dir, tmin: 0.0, tmax: f32::INFINITY }
+    }
+    /// Is the ray usable (finite origin, finite non-zero direction, tmin <= tmax)?
+    pub fn is_valid(&self) -> bool {
+        self.origin.is_finite()
+            && self.dir.is_finite()
+            && self.dir != Vec3::ZERO
+            && !self.tmin.is_nan()
+            && !self.tmax.is_nan()
+            && self.tmin <= self.tmax
+    }
+}
+
+/// The nearest surface a ray meets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter.
+    pub t: f32,
+    /// Outward unit normal of the solid there.
+    pub normal: Vec3,
+    /// Index of the object (see [`RenderScene::objects`]).
+    pub object: u32,
+    /// Index of the leaf whose surface it is (see [`RenderScene::leaf_info`]).
+    pub leaf: u32,
+    /// Kind-specific sub-surface id.
+    pub sub: u32,
+}
+
+/// What the scene knows about one top-level object.
+#[derive(Clone, Debug)]
+pub struct ObjectInfo {
+    /// Its entity.
+    pub entity: Entity,
+    /// Its name (`Name`, else `object<i>`).
+    pub name: String,
+    /// Root node in the program.
+    pub root: u32,
+    /// Bounds.
+    pub bounds: Aabb,
+}
+
+/// What the scene knows about one leaf.
+#[derive(Clone, Debug)]
+pub struct LeafInfo {
+    /// Its entity.
+    pub entity: Entity,
+    /// Its name (`Name`, else `leaf<i>`).
+    pub name: String,
+    /// Its colour (own `Material`, else the nearest ancestor's, else grey).
+    pub color: Vec3,
+    /// Object it belongs to.
+    pub object: u32,
+}
+
+/// Why a world could not be baked.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BakeError {
+    /// A leaf's numbers are out of range.
+    BadShape {
+        /// The entity.
+        entity: Entity,
+        /// Its name, if any.
+        name: Option<String>,
+        /// Field and message.
+        error: rothray_primitives::ShapeError,
+    },
+    /// A transform (accumulated down the tree) is singular or not finite.
+    SingularTransform {
+        /// The leaf entity.
+        entity: Entity,
+        /// Its name, if any.
+        name: Option<String>,
+    },
+    /// A CSG child has neither a shape nor a `CsgNode`, or no longer exists.
+    NotASolid {
+        /// The entity.
+        entity: Entity,
+    },
+    /// A CSG node with no children, or a cycle.
+    BadNode {
+        /// The entity.
+        entity: Entity,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl std::fmt::Display for BakeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BakeError::BadShape { entity, name, error } => {
+                write!(f, "{}: {}: {}", name.clone().unwrap_or(format!("{entity:?}")), error.field, error.message)
+            }
+            BakeError::SingularTransform { entity, name } => {
+                write!(f, "{}: transform is singular or not finite", name.clone().unwrap_or(format!("{entity:?}")))
+            }
+            BakeError::NotASolid { entity } => write!(f, "{entity:?} is a CSG child without a shape"),
+            BakeError::BadNode { entity, message } => write!(f, "{entity:?}: {message}"),
+        }
+    }
+}
+impl std::error::Error for BakeError {}
+
+/// The baked scene: SoA leaf table, CSG program, BVH over objects.
+#[derive(Default)]
+pub struct RenderScene {
+    /// Every leaf, SoA.
+    pub leaves: LeafTable,
+    /// Every CSG tree.
+    pub program: Program,
+    /// Top-level objects in order.
+    pub objects: Vec<ObjectInfo>,
+    /// Per leaf: entity, name, colour, object.
+    pub leaf_info: Vec<LeafInfo>,
+    objects_bvh: FlatBvh,
+    unbounded: Vec<u32>,
+    /// Bounds of the finite objects.
+    pub bounds: Aabb,
+    /// Length tolerance of the scene (fusing coincident crossings).
+    pub eps: f32,
+    /// How many times [`sync_scene`] rebuilt the tables.
+    pub bake_count: u64,
+    fingerprint: u64,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+fn leaf_shape(world: &World, e: Entity) -> Option<LeafShape> {
+    let er = world.entity(e).ok()?;
+    if let Some(s) = er.get::<&Sphere>() {
+        return Some(LeafShape::Sphere(*s));
+    }
+    if let Some(s) = er.get::<&Cuboid>() {
+        return Some(LeafShape::Cuboid(*s));
+    }
+    if let Some(s) = er.get::<&Cylinder>() {
+        return Some(LeafShape::Cylinder(*s));
+    }
+    if let Some(s) = er.get::<&Cone>() {
+        return Some(LeafShape::Cone(*s));
+    }
+    if let Some(s) = er.get::<&Torus>() {
+        return Some(LeafShape::Torus(*s));
+    }
+    if let Some(s) = er.get::<&HalfSpace>() {
+        return Some(LeafShape::HalfSpace(*s));
+    }
+    None
+}
+
+fn is_solid(world: &World, e: Entity) -> bool {
+    world.get::<&CsgNode>(e).is_ok() || leaf_shape(world, e).is_some()
+}
+
+fn name_of(world: &World, e: Entity) -> Option<String> {
+    world.get::<&Name>(e).ok().map(|n| n.0.clone())
+}
+
+/// System: the top-level objects of a world, in order: entities with a shape or a
+/// `CsgNode` that are nobody's CSG child and not `Hidden`.
+pub fn find_objects(world: &World) -> Vec<Entity> {
+    let mut child = std::collections::HashSet::new();
+    for (_, n) in world.query::<&CsgNode>().iter() {
+        child.extend(n.children.iter().copied());
+    }
+    let mut roots: Vec<(u32, Entity)> = world
+        .iter()
+        .map(|er| er.entity())
+        .filter(|&e| !child.contains(&e) && world.get::<&Hidden>(e).is_err() && is_solid(world, e))
+        .map(|e| (world.get::<&ObjectOrder>(e).map(|o| o.0).unwrap_or(u32::MAX), e))
+        .collect();
+    roots.sort_by_key(|&(o, e)| (o, e.id()));
+    roots.into_iter().map(|(_, e)| e).collect()
+}
+
+/// A cheap fingerprint of everything the bake reads, so [`sync_scene`] can skip
+/// work when nothing changed.
+pub fn fingerprint_world(world: &World) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for er in world.iter() {
+        let e = er.entity();
+        if !is_solid(world, e) {
+            continue;
+        }
+        e.hash(&mut h);
+        if let Some(s) = leaf_shape(world, e) {
+            format!("{s:?}").hash(&mut h);
+        }
+        if let Ok(t) = world.get::<&Transform>(e) {
+            for v in t.0.to_cols_array() {
+                v.to_bits().hash(&mut h);
+            }
+        }
+        if let Ok(n) = world.get::<&CsgNode>(e) {
+            (n.op as u8).hash(&mut h);
+            n.children.hash(&mut h);
+        }
+        if let Ok(m) = world.get::<&Material>(e) {
+            m.color.to_array().map(f32::to_bits).hash(&mut h);
+        }
+        if let Ok(n) = world.get::<&Name>(e) {
+            n.0.hash(&mut h);
+        }
+        if let Ok(o) = world.get::<&ObjectOrder>(e) {
+            o.0.hash(&mut h);
+        }
+        world.get::<&Hidden>(e).is_ok().hash(&mut h);
+    }
+    h.finish()
+}
+
+/// System: re-bakes `scene` from `world` if anything it reads changed since the
+/// last call (returns whether it baked).
+pub fn sync_scene(world: &mut World, scene: &mut RenderScene) -> Result<bool, BakeError> {
+    let fp = fingerprint_world(world);
+    if scene.bake_count > 0 && fp == scene.fingerprint {
+        return Ok(false);
+    }
+    bake_scene(world, scene)?;
+    scene.fingerprint = fp;
+    Ok(true)
+}
+
+enum Visit {
+    Enter(Entity, DAffine3, Option<Vec3>),
+    Exit(Entity, Op, usize),
+}
+
+/// System: bakes every object of `world` into `scene` (leaf table in pre-order of
+/// the trees, CSG program, BVHs). Iterative, so any nesting depth works.
+pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeError> {
+    let roots = find_objects(world);
+    let mut leaves = LeafTable::default();
+    let mut leaf_info = Vec::new();
+    let mut objects = Vec::new();
+    // Program nodes reference leaves by index; build leaves first in a pass that
+    // also emits the program, via a builder that borrows the leaf table lazily.
+    let mut ops: Vec<ProgOp> = Vec::new();
+    let mut on_path = std::collections::HashSet::new();
+    for (oi, &root) in roots.iter().enumerate() {
+        let mut stack = vec![Visit::Enter(root, DAffine3::IDENTITY, None)];
+        while let Some(v) = stack.pop() {
+            match v {
+                Visit::Enter(e, parent, color) => {
+                    let Ok(er) = world.entity(e) else { return Err(BakeError::NotASolid { entity: e }) };
+                    let global = parent * er.get::<&Transform>().map(|t| t.0).unwrap_or(DAffine3::IDENTITY);
+                    let color = er.get::<&Material>().map(|m| m.color).or(color);
+                    if let Some(shape) = leaf_shape(world, e) {
+                        let idx = leaves.push(&shape, &global).map_err(|err| match err {
+                            LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
+                            LeafError::SingularTransform => {
+                                BakeError::SingularTransform { entity: e, name: name_of(world, e) }
+                            }
+                        })?;
+                        leaf_info.push(LeafInfo {
+                            entity: e,
+                            name: name_of(world, e).unwrap_or_else(|| format!("leaf{idx}")),
+                            color: color.unwrap_or(Vec3::splat(0.8)),
+                            object: oi as u32,
+                        });
+                        ops.push(ProgOp::Leaf(idx));
+                    } else if let Some(node) = er.get::<&CsgNode>() {
+                        if node.children.is_empty() {
+                            return Err(BakeError::BadNode { entity: e, message: "CSG node without children".into() });
+                        }
+                        if !on_path.insert(e) {
+                            return Err(BakeError::BadNode { entity: e, message: "CSG node is its own ancestor".into() });
+                        }
+                        stack.push(Visit::Exit(e, node.op, node.children.len()));
+                        for &c in node.children.iter().rev() {
+                            if !is_solid(world, c) {
+                                return Err(BakeError::NotASolid { entity: c });
+                            }
+                            stack.push(Visit::Enter(c, global, color));
+                        }
+                    } else {
+                        return Err(BakeError::NotASolid { entity: e });
+                    }
+                }
+                Visit::Exit(e, op, n) => {
+                    on_path.remove(&e);
+                    ops.push(ProgOp::Op(op, n as u32));
+                }
+            }
+        }
+        ops.push(ProgOp::Root(oi as u32));
+        objects.push(ObjectInfo {
+            entity: root,
+            name: name_of(world, root).unwrap_or_else(|| format!("object{oi}")),
+            root: 0,
+            bounds: Aabb::EMPTY,
+        });
+    }
+    // Replay the post-order ops into the program.
+    let mut b = ProgramBuilder::new(&leaves);
+    let mut vals: Vec<u32> = Vec::new();
+    for op in &ops {
+        match *op {
+            ProgOp::Leaf(i) => {
+                let n = b.leaf(i);
+                vals.push(n);
+            }
+            ProgOp::Op(op, n) => {
+                let at = vals.len() - n as usize;
+                let node = b.op(op, &vals[at..]);
+                vals.truncate(at);
+                vals.push(node);
+            }
+            ProgOp::Root(oi) => {
+                let r = vals.pop().expect("root");
+                objects[oi as usize].root = r;
+                objects[oi as usize].bounds = b.program.bounds[r as usize];
+            }
+        }
+    }
+    let program = b.finish();
+    // Objects BVH over the bounded objects.
+    let mut boxes = Vec::new();
+    let mut ids = Vec::new();
+    let mut unbounded = Vec::new();
+    let mut bounds = Aabb::EMPTY;
+    for (i, o) in objects.iter().enumerate() {
+        if o.bounds.is_empty() {
+            continue;
+        }
+        if o.bounds.is_finite() {
+            boxes.push(o.bounds);
+            ids.push(i as u32);
+            bounds = bounds.union(&o.bounds);
+        } else {
+            unbounded.push(i as u32);
+        }
+    }
+    let mut bvh = FlatBvh::build(&boxes, 1);
+    for p in bvh.prims.iter_mut() {
+        *p = ids[*p as usize];
+    }
+    if bounds.is_empty() {
+        // Only unbounded solids (or none): take the leaves' finite parts.
+        for lb in &leaves.bounds {
+            if lb.is_finite() {
+                bounds = bounds.union(lb);
+            }
+        }
+    }
+    let diag = if bounds.is_empty() { 1.0 } else { bounds.diagonal_length().max(1e-3) };
+    scene.leaves = leaves;
+    scene.program = program;
+    scene.objects = objects;
+    scene.leaf_info = leaf_info;
+    scene.objects_bvh = bvh;
+    scene.unbounded = unbounded;
+    scene.bounds = bounds;
+    scene.eps = 1e-5 * diag;
+    scene.bake_count += 1;
+    Ok(())
+}
+
+enum ProgOp {
+    Leaf(u32),
+    Op(Op, u32),
+    Root(u32),
+}
+
+impl RenderScene {
+    /// Bakes a world into a new scene.
+    pub fn from_world(world: &World) -> Result<RenderScene, BakeError> {
+        let mut s = RenderScene::default();
+        bake_scene(world, &mut s)?;
+        Ok(s)
+    }
+
+    /// The per-ray context: the fusing tolerance grows with the distance from the
+    /// scene, since f32 rounding of the crossings does.
+    #[inline]
+    pub fn ray_ctx(&self, o: Vec3, d: Vec3) -> RayCtx {
+        let c = if self.bounds.is_empty() { Vec3::ZERO } else { self.bounds.center() };
+        let far = (o - c).length();
+        RayCtx::new(o, d, self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 })
+    }
+
+    /// Object index of an entity (a top-level object).
+    pub fn object_of(&self, e: Entity) -> Option<u32> {
+        self.objects.iter().position(|o| o.entity == e).map(|i| i as u32)
+    }
+
+    /// Nearest hit (uses a thread-local scratch).
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        SCRATCH.with(|s| self.intersect_with(ray, &mut s.borrow_mut()))
+    }
+
+    /// Is anything hit along the ray (shadow rays)?
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        SCRATCH.with(|s| self.occluded_with(ray, &mut s.borrow_mut()))
+    }
+
+    /// First surface of object `oi` within `[tmin, tmax]`: `(t, surface)`.
+    #[inline]
+    fn object_first(&self, oi: u32, ctx: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) -> Option<(f32, Surf)> {
+        let root = self.objects[oi as usize].root;
+        let valid = self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
+        let f = first_surface(scratch.out.as_slice());
+        if f.is_none() && valid < tmax {
+            // A union stopped at an entry that another operand covered: redo in full.
+            self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::All, scratch);
+            return first_surface(scratch.out.as_slice());
+        }
+        f
+    }
+
+    /// Nearest hit with caller-provided scratch (no thread-local access).
+    pub fn intersect_with(&self, ray: &Ray, scratch: &mut Scratch) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let ctx = self.ray_ctx(ray.origin, ray.dir);
+        let mut best_t = ray.tmax;
+        let mut best: Option<(u32, Surf)> = None;
+        for &oi in &self.unbounded {
+            if let Some((t, s)) = self.object_first(oi, &ctx, ray.tmin, best_t, scratch) {
+                if t < best_t || best.is_none() {
+                    best_t = t;
+                    best = Some((oi, s));
+                }
+            }
+        }
+        self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, best_t, |oi, _| {
+            if let Some((t, s)) = self.object_first(oi, &ctx, ray.tmin, best_t, scratch) {
+                if t < best_t || best.is_none() {
+                    best_t = t;
+                    best = Some((oi, s));
+                }
+            }
+            best_t
+        });
+        let (oi, s) = best?;
+        let leaf = s.leaf_index();
+        let mut n = self.leaves.normal(leaf, s.sub, ray.origin, ray.dir, best_t);
+        if s.flipped() {
+            n = -n;
+        }
+        Some(Hit { t: best_t, normal: n, object: oi, leaf, sub: s.sub })
+    }
+
+    /// Any-hit with caller-provided scratch.
+    pub fn occluded_with(&self, ray: &Ray, scratch: &mut Scratch) -> bool {
+        if !ray.is_valid() {
+            return false;
+        }
+        let ctx = self.ray_ctx(ray.origin, ray.dir);
+        for &oi in &self.unbounded {
+            if self.object_first(oi, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
+                return true;
+            }
+        }
+        let mut hit = false;
+        self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, ray.tmax, |oi, _| {
+            if self.object_first(oi, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
+                hit = true;
+                return f32::NEG_INFINITY;
+            }
+            ray.tmax
+        });
+        hit
+    }
+
+    /// The Roth diagram of object `oi` along the ray, clipped to `[tmin, tmax]`.
+    pub fn spans(&self, ray: &Ray, oi: u32) -> Vec<Span> {
+        SCRATCH.with(|s| {
+            let s = &mut *s.borrow_mut();
+            if !ray.is_valid() || oi as usize >= self.objects.len() {
+                return Vec::new();
+            }
+            let ctx = self.ray_ctx(ray.origin, ray.dir);
+            self.program.eval(&self.leaves, self.objects[oi as usize].root, &ctx, ray.tmin, ray.tmax, Mode::All, s);
+            s.out.as_slice().to_vec()
+        })
+    }
+
+    /// The Roth diagram of the solid an entity stands for (an object).
+    pub fn spans_of(&self, ray: &Ray, e: Entity) -> Vec<Span> {
+        self.object_of(e).map(|oi| self.spans(ray, oi)).unwrap_or_default()
+    }
+
+    /// Is the point inside object `oi` (boundary included)?
+    pub fn contains(&self, p: Vec3, oi: u32) -> bool {
+        if oi as usize >= self.objects.len() || !p.is_finite() {
+            return false;
+        }
+        SCRATCH.with(|s| self.program.contains(&self.leaves, self.objects[oi as usize].root, p, &mut s.borrow_mut()))
+    }
+
+    /// Is the point inside the object entity `e`?
+    pub fn contains_entity(&self, p: Vec3, e: Entity) -> bool {
+        self.object_of(e).map(|oi| self.contains(p, oi)).unwrap_or(false)
+    }
+
+    /// The objects containing `p`.
+    pub fn classify(&self, p: Vec3) -> Vec<u32> {
+        (0..self.objects.len() as u32).filter(|&oi| self.contains(p, oi)).collect()
+    }
+
+    /// Nearest hits of a bundle of rays (in parallel for large bundles).
+    pub fn intersect_bundle(&self, rays: &[Ray], out: &mut [Option<Hit>]) {
+        use rayon::prelude::*;
+        assert_eq!(rays.len(), out.len());
+        if rays.len() < 256 {
+            SCRATCH.with(|s| {
+                let s = &mut *s.borrow_mut();
+                for (r, o) in rays.iter().zip(out.iter_mut()) {
+                    *o = self.intersect_with(r, s);
+                }
+            });
+            return;
+        }
+        rays.par_chunks(64).zip(out.par_chunks_mut(64)).for_each_init(Scratch::default, |s, (rs, os)| {
+            for (r, o) in rs.iter().zip(os.iter_mut()) {
+                *o = self.intersect_with(r, s);
+            }
+        });
+    }
+
+    /// Any-hit of a bundle of rays.
+    pub fn occluded_bundle(&self, rays: &[Ray], out: &mut [bool]) {
+        use rayon::prelude::*;
+        assert_eq!(rays.len(), out.len());
+        rays.par_chunks(64).zip(out.par_chunks_mut(64)).for_each_init(Scratch::default, |s, (rs, os)| {
+            for (r, o) in rs.iter().zip(os.iter_mut()) {
+                *o = self.occluded_with(r, s);
+            }
+        });
+    }
+}

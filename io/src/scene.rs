@@ -1,0 +1,508 @@
+//! The JSON scene format (see `docs/scene-format.md`): parsed into a `hecs::World`
+//! with errors located by JSON path.
+
+use std::path::{Path, PathBuf};
+
+use glam::{DMat4, DVec3, Vec3};
+use hecs::{Entity, World};
+use rothray_engine::{
+    Camera, Cone, CsgNode, Cuboid, Cylinder, HalfSpace, Light, Material, Name, ObjectOrder, Op, Sphere, Torus,
+    Transform,
+};
+use rothray_primitives::LeafShape;
+use serde::Deserialize;
+use serde_json::{Map, Value};
+
+/// A scene file, loaded: settings plus a World holding its solids.
+pub struct SceneFile {
+    /// The file it came from.
+    pub path: PathBuf,
+    /// The scene's `name` (if any).
+    pub name: Option<String>,
+    /// Camera.
+    pub camera: Camera,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Background colour.
+    pub background: Vec3,
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// Objects (and their parts) as entities.
+    pub world: World,
+    /// Top-level object entities, in file order.
+    pub objects: Vec<Entity>,
+    /// Warnings (e.g. from mesh import).
+    pub warnings: Vec<String>,
+}
+
+/// A scene that could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Io {
+        /// File.
+        file: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not JSON.
+    #[error("{file}:{line}:{column}: invalid JSON: {message}")]
+    Json {
+        /// File.
+        file: String,
+        /// Line (1-based).
+        line: usize,
+        /// Column (1-based).
+        column: usize,
+        /// What the parser said.
+        message: String,
+    },
+    /// JSON that breaks the scene format.
+    #[error("{file}: {at}: {message}")]
+    Invalid {
+        /// File.
+        file: String,
+        /// JSON path (`objects[2].shape.difference[1].sphere.radius`).
+        at: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+struct Ctx<'a> {
+    file: String,
+    dir: &'a Path,
+    world: World,
+    names: std::collections::HashSet<String>,
+    warnings: Vec<String>,
+}
+
+type R<T> = Result<T, SceneError>;
+
+impl Ctx<'_> {
+    fn err<T>(&self, at: &str, message: impl Into<String>) -> R<T> {
+        Err(SceneError::Invalid { file: self.file.clone(), at: at.to_string(), message: message.into() })
+    }
+    fn obj<'v>(&self, v: &'v Value, at: &str) -> R<&'v Map<String, Value>> {
+        match v.as_object() {
+            Some(m) => Ok(m),
+            None => self.err(at, format!("expected an object, got {}", kind_of(v))),
+        }
+    }
+    fn keys(&self, m: &Map<String, Value>, at: &str, allowed: &[&str], required: &[&str]) -> R<()> {
+        for k in m.keys() {
+            if !allowed.contains(&k.as_str()) {
+                return self.err(&join(at, k), format!("unknown key `{k}` (expected one of: {})", allowed.join(", ")));
+            }
+        }
+        for r in required {
+            if !m.contains_key(*r) {
+                return self.err(at, format!("missing field `{r}`"));
+            }
+        }
+        Ok(())
+    }
+    fn num(&self, v: &Value, at: &str) -> R<f64> {
+        match v.as_f64() {
+            Some(x) if x.is_finite() && (x.abs() <= f32::MAX as f64) => Ok(x),
+            Some(x) => self.err(at, format!("number {x} is not finite in f32")),
+            None => self.err(at, format!("expected a number, got {}", kind_of(v))),
+        }
+    }
+    fn vec3(&self, v: &Value, at: &str) -> R<DVec3> {
+        match v.as_array() {
+            Some(a) if a.len() == 3 => Ok(DVec3::new(
+                self.num(&a[0], &format!("{at}[0]"))?,
+                self.num(&a[1], &format!("{at}[1]"))?,
+                self.num(&a[2], &format!("{at}[2]"))?,
+            )),
+            Some(a) => self.err(at, format!("expected an array of 3 numbers, got {} elements", a.len())),
+            None => self.err(at, format!("expected an array of 3 numbers, got {}", kind_of(v))),
+        }
+    }
+    fn color(&self, v: &Value, at: &str) -> R<Vec3> {
+        let c = self.vec3(v, at)?;
+        if c.min_element() < 0.0 {
+            return self.err(at, "colour components must be >= 0");
+        }
+        Ok(c.as_vec3())
+    }
+    fn field<'v>(&self, m: &'v Map<String, Value>, k: &str, at: &str) -> R<&'v Value> {
+        match m.get(k) {
+            Some(v) => Ok(v),
+            None => self.err(at, format!("missing field `{k}`")),
+        }
+    }
+    fn name(&mut self, v: &Value, at: &str) -> R<String> {
+        let Some(s) = v.as_str() else { return self.err(at, format!("expected a string, got {}", kind_of(v))) };
+        if s.is_empty() {
+            return self.err(at, "name is empty");
+        }
+        if !self.names.insert(s.to_string()) {
+            return self.err(at, format!("name `{s}` is used twice"));
+        }
+        Ok(s.to_string())
+    }
+}
+
+fn join(at: &str, k: &str) -> String {
+    if at.is_empty() { k.to_string() } else { format!("{at}.{k}") }
+}
+
+fn kind_of(v: &Value) -> &'static str {
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "an array",
+        Value::Object(_) => "an object",
+    }
+}
+
+const LEAF_KINDS: &[&str] = &["sphere", "box", "cylinder", "cone", "torus", "plane"];
+const NODE_KINDS: &[&str] = &["union", "intersection", "difference", "transformed"];
+
+/// Loads a scene file (mesh paths are relative to it). Runs on a thread with a
+/// large stack so that deeply nested scenes (10 000 levels) parse.
+pub fn load_scene(path: &Path) -> Result<SceneFile, SceneError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { file: file.clone(), source })?;
+    parse_scene(&text, path)
+}
+
+/// Parses scene text; `path` names the file in errors and anchors relative mesh paths.
+pub fn parse_scene(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
+    let text = text.to_string();
+    let path = path.to_path_buf();
+    std::thread::Builder::new()
+        .name("scene-parse".into())
+        .stack_size(1 << 30)
+        .spawn(move || parse_scene_inner(&text, &path))
+        .expect("spawn parser thread")
+        .join()
+        .unwrap_or_else(|_| {
+            Err(SceneError::Invalid { file: String::new(), at: String::new(), message: "parser crashed".into() })
+        })
+}
+
+fn parse_scene_inner(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
+    let file = path.display().to_string();
+    let mut de = serde_json::Deserializer::from_str(text);
+    de.disable_recursion_limit();
+    let root = Value::deserialize(&mut de)
+        .and_then(|v| de.end().map(|_| v))
+        .map_err(|e| SceneError::Json { file: file.clone(), line: e.line(), column: e.column(), message: e.to_string() })?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut cx = Ctx { file, dir, world: World::new(), names: Default::default(), warnings: Vec::new() };
+    let res = parse_root(&mut cx, &root, path);
+    // Deep trees drop recursively: do it here, on the big stack.
+    drop(root);
+    res
+}
+
+fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
+    let m = cx.obj(root, "")?.clone();
+    cx.keys(&m, "", &["name", "camera", "image", "background", "lights", "objects"], &["camera", "objects"])?;
+    let name = match m.get("name") {
+        Some(Value::String(s)) => Some(s.clone()),
+        Some(v) => return cx.err("name", format!("expected a string, got {}", kind_of(v))),
+        None => None,
+    };
+    // camera
+    let cm = cx.obj(&m["camera"], "camera")?;
+    cx.keys(cm, "camera", &["eye", "target", "up", "fov_y_deg"], &["eye", "target", "fov_y_deg"])?;
+    let eye = cx.vec3(&cm["eye"], "camera.eye")?;
+    let target = cx.vec3(&cm["target"], "camera.target")?;
+    let up = match cm.get("up") {
+        Some(v) => cx.vec3(v, "camera.up")?,
+        None => DVec3::Y,
+    };
+    let fov = cx.num(&cm["fov_y_deg"], "camera.fov_y_deg")?;
+    if !(fov > 0.0 && fov < 180.0) {
+        return cx.err("camera.fov_y_deg", format!("must be between 0 and 180 degrees, got {fov}"));
+    }
+    if (target - eye).length() == 0.0 {
+        return cx.err("camera.target", "target equals eye");
+    }
+    if up.length() == 0.0 {
+        return cx.err("camera.up", "is the zero vector");
+    }
+    if (target - eye).normalize().cross(up.normalize()).length() < 1e-9 {
+        return cx.err("camera.up", "is parallel to the viewing direction");
+    }
+    let camera = Camera { eye: eye.as_vec3(), target: target.as_vec3(), up: up.as_vec3(), fov_y_deg: fov as f32 };
+    // image
+    let (mut width, mut height) = (800u32, 600u32);
+    if let Some(iv) = m.get("image") {
+        let im = cx.obj(iv, "image")?;
+        cx.keys(im, "image", &["width", "height"], &[])?;
+        for (k, slot) in [("width", &mut width), ("height", &mut height)] {
+            if let Some(v) = im.get(k) {
+                let at = format!("image.{k}");
+                match v.as_u64() {
+                    Some(x) if (1..=65536).contains(&x) => *slot = x as u32,
+                    _ => return cx.err(&at, format!("expected an integer from 1 to 65536, got {v}")),
+                }
+            }
+        }
+    }
+    let background = match m.get("background") {
+        Some(v) => cx.color(v, "background")?,
+        None => Vec3::ZERO,
+    };
+    let lights = match m.get("lights") {
+        None => {
+            // Over the camera's shoulder: from behind-left-above the eye toward the target.
+            let fwd = (target - eye).normalize();
+            let right = fwd.cross(up).normalize();
+            let dir = fwd - up.normalize() * 0.5 + right * 0.3;
+            vec![Light { direction: dir.normalize().as_vec3(), color: Vec3::ONE }]
+        }
+        Some(Value::Array(a)) => {
+            let mut out = Vec::new();
+            for (i, l) in a.iter().enumerate() {
+                let at = format!("lights[{i}]");
+                let lm = cx.obj(l, &at)?;
+                cx.keys(lm, &at, &["direction", "color"], &["direction"])?;
+                let d = cx.vec3(&lm["direction"], &format!("{at}.direction"))?;
+                if d.length() == 0.0 {
+                    return cx.err(&format!("{at}.direction"), "is the zero vector");
+                }
+                let c = match lm.get("color") {
+                    Some(v) => cx.color(v, &format!("{at}.color"))?,
+                    None => Vec3::ONE,
+                };
+                out.push(Light { direction: d.as_vec3(), color: c });
+            }
+            out
+        }
+        Some(v) => return cx.err("lights", format!("expected an array, got {}", kind_of(v))),
+    };
+    // objects
+    let Some(objs) = m["objects"].as_array() else {
+        return cx.err("objects", format!("expected an array, got {}", kind_of(&m["objects"])));
+    };
+    let mut objects = Vec::new();
+    for (i, o) in objs.iter().enumerate() {
+        let at = format!("objects[{i}]");
+        let om = cx.obj(o, &at)?;
+        cx.keys(om, &at, &["name", "color", "shape"], &["shape"])?;
+        let name = match om.get("name") {
+            Some(v) => cx.name(v, &format!("{at}.name"))?,
+            None => format!("object{i}"),
+        };
+        let color = match om.get("color") {
+            Some(v) => Some(cx.color(v, &format!("{at}.color"))?),
+            None => None,
+        };
+        let e = parse_shape(cx, &om["shape"], &format!("{at}.shape"), color)?;
+        // The object is its shape's root entity; give it the object's name and order.
+        let leaf_name = cx.world.get::<&Name>(e).ok().map(|n| n.0.clone());
+        let root = if leaf_name.is_some() && cx.world.get::<&CsgNode>(e).is_err() {
+            // A bare leaf keeps its own name for `leaf`: wrap it in a one-child union.
+            cx.world.spawn((CsgNode::union([e]),))
+        } else {
+            e
+        };
+        let _ = cx.world.insert(root, (Name::new(name), ObjectOrder(i as u32)));
+        if let Some(c) = color {
+            let _ = cx.world.insert_one(root, Material { color: c });
+        }
+        objects.push(root);
+    }
+    let world = std::mem::take(&mut cx.world);
+    Ok(SceneFile {
+        path: path.to_path_buf(),
+        name,
+        camera,
+        width,
+        height,
+        background,
+        lights,
+        world,
+        objects,
+        warnings: std::mem::take(&mut cx.warnings),
+    })
+}
+
+fn parse_shape(cx: &mut Ctx, v: &Value, at: &str, _inherited: Option<Vec3>) -> R<Entity> {
+    let m = cx.obj(v, at)?;
+    let kinds: Vec<&String> = m.keys().filter(|k| k.as_str() != "name" && k.as_str() != "color").collect();
+    if kinds.is_empty() {
+        return cx.err(at, format!("missing the shape kind (one of: {}, {})", LEAF_KINDS.join(", "), NODE_KINDS.join(", ")));
+    }
+    if kinds.len() > 1 {
+        return cx.err(at, format!("more than one shape kind: {}", kinds.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")));
+    }
+    let kind = kinds[0].clone();
+    let kat = join(at, &kind);
+    let name = match m.get("name") {
+        Some(v) => Some(cx.name(v, &join(at, "name"))?),
+        None => None,
+    };
+    let color = match m.get("color") {
+        Some(v) => Some(cx.color(v, &join(at, "color"))?),
+        None => None,
+    };
+    let body = &m[&kind];
+    let e = match kind.as_str() {
+        "union" | "intersection" | "difference" => {
+            let Some(arr) = body.as_array() else {
+                return cx.err(&kat, format!("expected an array of shapes, got {}", kind_of(body)));
+            };
+            if arr.is_empty() {
+                return cx.err(&kat, "needs at least one shape");
+            }
+            let mut children = Vec::with_capacity(arr.len());
+            for (i, c) in arr.iter().enumerate() {
+                children.push(parse_shape(cx, c, &format!("{kat}[{i}]"), None)?);
+            }
+            let op = match kind.as_str() {
+                "union" => Op::Union,
+                "intersection" => Op::Intersection,
+                _ => Op::Difference,
+            };
+            cx.world.spawn((CsgNode { op, children },))
+        }
+        "transformed" => {
+            let tm = cx.obj(body, &kat)?;
+            cx.keys(tm, &kat, &["shape", "translate", "rotate_deg", "scale", "matrix"], &["shape"])?;
+            let t = if let Some(mv) = tm.get("matrix") {
+                for k in ["translate", "rotate_deg", "scale"] {
+                    if tm.contains_key(k) {
+                        return cx.err(&join(&kat, k), "cannot be combined with `matrix`");
+                    }
+                }
+                let mat = join(&kat, "matrix");
+                let Some(a) = mv.as_array() else { return cx.err(&mat, "expected an array of 16 numbers") };
+                if a.len() != 16 {
+                    return cx.err(&mat, format!("expected 16 numbers, got {}", a.len()));
+                }
+                let mut r = [0.0f64; 16];
+                for (i, x) in a.iter().enumerate() {
+                    r[i] = cx.num(x, &format!("{mat}[{i}]"))?;
+                }
+                if r[12] != 0.0 || r[13] != 0.0 || r[14] != 0.0 || r[15] != 1.0 {
+                    return cx.err(&mat, "last row must be 0 0 0 1");
+                }
+                // Row-major in the file; glam is column-major.
+                let m4 = DMat4::from_cols_array(&r).transpose();
+                let det = m4.determinant();
+                if !(det.abs() > 1e-12) {
+                    return cx.err(&mat, format!("matrix is singular (determinant {det})"));
+                }
+                Transform::from_mat4(m4)
+            } else {
+                let tr = match tm.get("translate") {
+                    Some(v) => cx.vec3(v, &join(&kat, "translate"))?,
+                    None => DVec3::ZERO,
+                };
+                let rot = match tm.get("rotate_deg") {
+                    Some(v) => cx.vec3(v, &join(&kat, "rotate_deg"))?,
+                    None => DVec3::ZERO,
+                };
+                let sc = match tm.get("scale") {
+                    Some(v) if v.is_number() => DVec3::splat(cx.num(v, &join(&kat, "scale"))?),
+                    Some(v) => cx.vec3(v, &join(&kat, "scale"))?,
+                    None => DVec3::ONE,
+                };
+                if sc.x == 0.0 || sc.y == 0.0 || sc.z == 0.0 {
+                    return cx.err(&join(&kat, "scale"), "a zero scale makes the transform singular");
+                }
+                Transform::from_trs_deg(tr, rot, sc)
+            };
+            let child = parse_shape(cx, &tm["shape"], &join(&kat, "shape"), None)?;
+            // A transformed node is a one-child union carrying the transform.
+            cx.world.spawn((CsgNode::union([child]), t))
+        }
+        _ if LEAF_KINDS.contains(&kind.as_str()) => {
+            let shape = parse_leaf(cx, &kind, body, &kat)?;
+            if let Err(e) = shape.validate() {
+                let at = join(&kat, e.field);
+                return cx.err(&at, e.message);
+            }
+            let e = match shape {
+                LeafShape::Sphere(s) => cx.world.spawn((s,)),
+                LeafShape::Cuboid(s) => cx.world.spawn((s,)),
+                LeafShape::Cylinder(s) => cx.world.spawn((s,)),
+                LeafShape::Cone(s) => cx.world.spawn((s,)),
+                LeafShape::Torus(s) => cx.world.spawn((s,)),
+                LeafShape::HalfSpace(s) => cx.world.spawn((s,)),
+            };
+            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
+            e
+        }
+        other => {
+            return cx.err(
+                &kat,
+                format!("unknown shape kind `{other}` (expected one of: {}, {})", LEAF_KINDS.join(", "), NODE_KINDS.join(", ")),
+            )
+        }
+    };
+    if let Some(n) = name {
+        let _ = cx.world.insert_one(e, Name::new(n));
+    }
+    if let Some(c) = color {
+        let _ = cx.world.insert_one(e, Material { color: c });
+    }
+    Ok(e)
+}
+
+fn parse_leaf(cx: &mut Ctx, kind: &str, body: &Value, at: &str) -> R<LeafShape> {
+    let m = cx.obj(body, at)?;
+    let f = |k: &str| join(at, k);
+    Ok(match kind {
+        "sphere" => {
+            cx.keys(m, at, &["center", "radius"], &["center", "radius"])?;
+            LeafShape::Sphere(Sphere {
+                center: cx.vec3(&m["center"], &f("center"))?.as_vec3(),
+                radius: cx.num(&m["radius"], &f("radius"))? as f32,
+            })
+        }
+        "box" => {
+            cx.keys(m, at, &["min", "max"], &["min", "max"])?;
+            LeafShape::Cuboid(Cuboid {
+                min: cx.vec3(&m["min"], &f("min"))?.as_vec3(),
+                max: cx.vec3(&m["max"], &f("max"))?.as_vec3(),
+            })
+        }
+        "cylinder" => {
+            cx.keys(m, at, &["a", "b", "radius"], &["a", "b", "radius"])?;
+            LeafShape::Cylinder(Cylinder {
+                a: cx.vec3(&m["a"], &f("a"))?.as_vec3(),
+                b: cx.vec3(&m["b"], &f("b"))?.as_vec3(),
+                radius: cx.num(&m["radius"], &f("radius"))? as f32,
+            })
+        }
+        "cone" => {
+            cx.keys(m, at, &["a", "b", "radius_a", "radius_b"], &["a", "b", "radius_a", "radius_b"])?;
+            LeafShape::Cone(Cone {
+                a: cx.vec3(&m["a"], &f("a"))?.as_vec3(),
+                b: cx.vec3(&m["b"], &f("b"))?.as_vec3(),
+                radius_a: cx.num(&m["radius_a"], &f("radius_a"))? as f32,
+                radius_b: cx.num(&m["radius_b"], &f("radius_b"))? as f32,
+            })
+        }
+        "torus" => {
+            cx.keys(m, at, &["center", "axis", "major", "minor"], &["center", "axis", "major", "minor"])?;
+            LeafShape::Torus(Torus {
+                center: cx.vec3(&m["center"], &f("center"))?.as_vec3(),
+                axis: cx.vec3(&m["axis"], &f("axis"))?.as_vec3(),
+                major: cx.num(&m["major"], &f("major"))? as f32,
+                minor: cx.num(&m["minor"], &f("minor"))? as f32,
+            })
+        }
+        "plane" => {
+            cx.keys(m, at, &["normal", "offset"], &["normal", "offset"])?;
+            LeafShape::HalfSpace(HalfSpace {
+                normal: cx.vec3(&m["normal"], &f("normal"))?.as_vec3(),
+                offset: cx.num(&m["offset"], &f("offset"))? as f32,
+            })
+        }
+        _ => unreachable!("checked by the caller"),
+    })
+}
