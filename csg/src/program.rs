@@ -41,6 +41,9 @@ pub struct Wide {
     pub bvh: FlatBvh,
     /// Positions of children with unbounded boxes (always visited).
     pub unbounded: Vec<u32>,
+    /// Every child is a leaf: the union is evaluated in one BVH walk with a
+    /// shrinking range, without frames or candidate lists.
+    pub all_leaves: bool,
 }
 
 /// All CSG trees of a scene, SoA, children before parents.
@@ -207,7 +210,8 @@ impl<'a> ProgramBuilder<'a> {
                 *x = ids[*x as usize];
             }
             wide = p.wides.len() as u32;
-            p.wides.push(Wide { bvh, unbounded });
+            let all_leaves = flat.iter().all(|&c| p.kind[c as usize] == NodeKind::Leaf);
+            p.wides.push(Wide { bvh, unbounded, all_leaves });
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);
@@ -247,7 +251,7 @@ impl Program {
             return tmax;
         }
         let base = scratch.frames.len();
-        self.push_frame(root, tmin, tmax, ray, scratch);
+        self.push_frame(root, tmin, tmax, ray, mode, leaves, scratch);
         loop {
             // Pick the next child of the top frame.
             let top = scratch.frames.len() - 1;
@@ -263,7 +267,7 @@ impl Program {
                         self.absorb(top, &leaf, ct1, ray, mode, scratch);
                         scratch.leaf = leaf;
                     } else {
-                        self.push_frame(c, ct0, ct1, ray, scratch);
+                        self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
                     }
                 }
                 None => {
@@ -280,7 +284,17 @@ impl Program {
         }
     }
 
-    fn push_frame(&self, node: u32, tmin: f32, tmax: f32, ray: &RayCtx, scratch: &mut Scratch) {
+    #[allow(clippy::too_many_arguments)]
+    fn push_frame(
+        &self,
+        node: u32,
+        tmin: f32,
+        tmax: f32,
+        ray: &RayCtx,
+        mode: Mode,
+        leaves: &LeafTable,
+        scratch: &mut Scratch,
+    ) {
         let mut frame = Frame {
             node,
             next: 0,
@@ -296,6 +310,13 @@ impl Program {
         let n = node as usize;
         if self.bounds[n].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
             frame.done = true;
+        } else if self.kind[n] == NodeKind::Union
+            && self.wide[n] != u32::MAX
+            && self.wides[self.wide[n] as usize].all_leaves
+        {
+            let valid = self.leaf_union(n, ray, tmin, tmax, mode, leaves, scratch, &mut frame.acc);
+            frame.valid = valid;
+            frame.done = true;
         } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX {
             let lo = scratch.cand.len();
             self.collect(n, 0, ray, tmin, tmax, scratch);
@@ -303,6 +324,54 @@ impl Program {
             frame.cand_hi = scratch.cand.len() as u32;
         }
         scratch.frames.push(frame);
+    }
+
+    /// A wide union of leaves in one front-to-back BVH walk. In nearest mode the
+    /// range shrinks to the first confirmed entry, which prunes the rest of the walk.
+    #[allow(clippy::too_many_arguments)]
+    fn leaf_union(
+        &self,
+        n: usize,
+        ray: &RayCtx,
+        tmin: f32,
+        tmax: f32,
+        mode: Mode,
+        leaves: &LeafTable,
+        scratch: &mut Scratch,
+        acc: &mut SpanList,
+    ) -> f32 {
+        let w = &self.wides[self.wide[n] as usize];
+        let first = self.first[n];
+        let mut valid = tmax;
+        let Scratch { leaf, tmp, .. } = scratch;
+        let mut visit = |pos: u32, hi: f32, acc: &mut SpanList, valid: &mut f32| {
+            let c = self.children[(first + pos) as usize];
+            leaf.clear();
+            leaves.spans(self.first[c as usize], ray.o, ray.d, tmin, hi, leaf);
+            if leaf.is_empty() {
+                return;
+            }
+            if acc.is_empty() {
+                acc.0.extend_from_slice(leaf.as_slice());
+            } else {
+                combine_into(Op::Union, acc, leaf.as_slice(), ray.eps, tmp);
+            }
+            if mode == Mode::Nearest {
+                let s = acc.as_slice()[0];
+                if s.s0.is_real() && s.t0 < *valid {
+                    *valid = s.t0;
+                    acc.truncate_at(s.t0);
+                }
+            }
+        };
+        for &pos in &w.unbounded {
+            visit(pos, valid, acc, &mut valid);
+        }
+        w.bvh.traverse(ray.o, ray.inv_d, tmin, valid, |pos, _| {
+            visit(pos, valid, acc, &mut valid);
+            valid
+        });
+        valid
     }
 
     /// Candidates of wide node `n` (children at positions >= `skip`) along `[tmin, tmax]`,

@@ -1,9 +1,19 @@
-//! A flat binary BVH built by obvhs (PLOC + reinsertion + collapse), converted to a
-//! compact node layout of our own that the tracer walks front to back with a
-//! shrinking `tmax` (house rule 3: it sees only boxes and a closure).
+//! BVHs over boxes, built by obvhs. Traversal uses obvhs' compressed 8-wide
+//! `CwBvh` (SSE node tests, octant-ordered front-to-back walk with a shrinking
+//! `tmax`); tiny sets (at most `max_leaf` boxes) skip the tree and are one leaf.
+//! House rule 3: the tracer's side sees only boxes and a closure.
+//!
+//! Measured on `scenes/forest` (10 000 leaves in one union, 1920x1080): the
+//! binary node layout this replaced walked ~20 nodes per call and the render took
+//! 1.2 s; see the README's benchmark table for the current figure.
 
 use glam::Vec3;
-use obvhs::{aabb::Aabb as OAabb, bvh2::builder::build_bvh2, BvhBuildParams};
+use obvhs::{
+    aabb::Aabb as OAabb,
+    cwbvh::{builder::build_cwbvh, CwBvh},
+    ray::{Ray as ORay, RayHit},
+    BvhBuildParams,
+};
 use smallvec::SmallVec;
 
 use crate::aabb::Aabb;
@@ -30,6 +40,8 @@ pub struct FlatBvh {
     pub nodes: Vec<BvhNode>,
     /// Primitive ids referenced by the leaves.
     pub prims: Vec<u32>,
+    /// The wide BVH (None for a single-leaf set).
+    pub cw: Option<CwBvh>,
 }
 
 impl FlatBvh {
@@ -46,22 +58,20 @@ impl FlatBvh {
             return FlatBvh {
                 nodes: vec![BvhNode { min: b.min, first: 0, max: b.max, count: boxes.len() as u32 }],
                 prims: (0..boxes.len() as u32).collect(),
+                cw: None,
             };
         }
         let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
         let mut params = BvhBuildParams::medium_build();
-        params.max_prims_per_leaf = max_leaf.max(1);
+        params.max_prims_per_leaf = max_leaf.clamp(1, 3);
         let mut t = std::time::Duration::ZERO;
-        let b2 = build_bvh2(&oboxes, params, &mut t);
-        let nodes = b2
-            .nodes
-            .iter()
-            .map(|n| {
-                let a = n.aabb();
-                BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
-            })
-            .collect();
-        FlatBvh { nodes, prims: b2.primitive_indices.clone() }
+        let cw = build_cwbvh(&oboxes, params, &mut t);
+        let b = cw.total_aabb;
+        FlatBvh {
+            nodes: vec![BvhNode { min: b.min.into(), first: 0, max: b.max.into(), count: 0 }],
+            prims: cw.primitive_indices.clone(),
+            cw: Some(cw),
+        }
     }
 
     /// Root box (empty for an empty BVH).
@@ -76,6 +86,21 @@ impl FlatBvh {
     #[inline]
     pub fn traverse(&self, o: Vec3, inv_d: Vec3, tmin: f32, mut tmax: f32, mut f: impl FnMut(u32, f32) -> f32) {
         if self.nodes.is_empty() {
+            return;
+        }
+        if let Some(cw) = &self.cw {
+            let d = inv_d.recip();
+            let ray = ORay::new(o.into(), d.into(), tmin, tmax);
+            let mut hit = RayHit::none();
+            let prims = &self.prims;
+            cw.ray_traverse(ray, &mut hit, |r, slot| {
+                let nt = f(prims[slot], r.tmin);
+                if nt < tmin {
+                    // Stop: a tmax below tmin culls every remaining node.
+                    return f32::NEG_INFINITY;
+                }
+                nt
+            });
             return;
         }
         let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
@@ -117,9 +142,18 @@ impl FlatBvh {
         }
     }
 
-    /// Visits every primitive whose leaf box contains `p`.
+    /// Visits every primitive whose leaf box contains `p` (a superset is fine:
+    /// callers test the primitive itself). Walks a short ray through `p`.
     pub fn point_query(&self, p: Vec3, mut f: impl FnMut(u32)) {
         if self.nodes.is_empty() {
+            return;
+        }
+        if self.cw.is_some() {
+            let d = Vec3::new(1.0, 0.618034, 0.381966);
+            self.traverse(p, d.recip(), 0.0, 0.0, |prim, _| {
+                f(prim);
+                0.0
+            });
             return;
         }
         let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
