@@ -1,1 +1,12 @@
+//! Integration tests of the whole engine: one binary, modules inside.
+//!
+//! Every randomized test prints its seed; rerun a failure with the same seed
+//! by editing the constant it names.
 
+mod bad_input;
+mod cli;
+mod coincident;
+mod csg_oracle;
+mod leaf_oracle;
+mod oracle;
+mod povray;

@@ -105,7 +105,8 @@ struct Frame {
     cand_hi: u32,
     tmin: f32,
     tmax: f32,
-    /// The result is exact up to here (a nearest-mode union may stop early).
+    /// The result is exact up to here (a nearest-mode union may stop early);
+    /// infinity when nothing was cut short.
     valid: f32,
     /// Length of `Scratch::cand` when the frame was pushed.
     cand_base: u32,
@@ -264,7 +265,8 @@ impl Program {
                         let mut leaf = std::mem::take(&mut scratch.leaf);
                         leaf.clear();
                         leaves.spans(self.first[c as usize], ray.o, ray.d, ct0, ct1, &mut leaf);
-                        self.absorb(top, &leaf, ct1, ray, mode, scratch);
+                        // A leaf's spans are exact on the range it was asked for.
+                        self.absorb(top, &leaf, f32::INFINITY, ray, mode, scratch);
                         scratch.leaf = leaf;
                     } else {
                         self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
@@ -275,7 +277,7 @@ impl Program {
                     scratch.cand.truncate(f.cand_base as usize);
                     if scratch.frames.len() == base {
                         scratch.out = f.acc;
-                        return f.valid;
+                        return f.valid.min(tmax);
                     }
                     let parent = scratch.frames.len() - 1;
                     self.absorb(parent, &f.acc, f.valid, ray, mode, scratch);
@@ -302,7 +304,7 @@ impl Program {
             cand_hi: 0,
             tmin,
             tmax,
-            valid: tmax,
+            valid: f32::INFINITY,
             cand_base: scratch.cand.len() as u32,
             done: false,
             acc: SpanList::new(),
@@ -342,12 +344,14 @@ impl Program {
     ) -> f32 {
         let w = &self.wides[self.wide[n] as usize];
         let first = self.first[n];
-        let mut valid = tmax;
+        // `hi`: the working range's end; `valid`: where the result stops being exact.
+        let mut hi = tmax;
+        let mut valid = f32::INFINITY;
         let Scratch { leaf, tmp, .. } = scratch;
-        let mut visit = |pos: u32, hi: f32, acc: &mut SpanList, valid: &mut f32| {
+        let mut visit = |pos: u32, acc: &mut SpanList, hi: &mut f32, valid: &mut f32| {
             let c = self.children[(first + pos) as usize];
             leaf.clear();
-            leaves.spans(self.first[c as usize], ray.o, ray.d, tmin, hi, leaf);
+            leaves.spans(self.first[c as usize], ray.o, ray.d, tmin, *hi, leaf);
             if leaf.is_empty() {
                 return;
             }
@@ -358,18 +362,19 @@ impl Program {
             }
             if mode == Mode::Nearest {
                 let s = acc.as_slice()[0];
-                if s.s0.is_real() && s.t0 < *valid {
+                if s.s0.is_real() && s.t0 < *hi {
+                    *hi = s.t0;
                     *valid = s.t0;
                     acc.truncate_at(s.t0);
                 }
             }
         };
         for &pos in &w.unbounded {
-            visit(pos, valid, acc, &mut valid);
+            visit(pos, acc, &mut hi, &mut valid);
         }
-        w.bvh.traverse(ray.o, ray.inv_d, tmin, valid, |pos, _| {
-            visit(pos, valid, acc, &mut valid);
-            valid
+        w.bvh.traverse(ray.o, ray.inv_d, tmin, hi, |pos, _| {
+            visit(pos, acc, &mut hi, &mut valid);
+            hi
         });
         valid
     }
@@ -484,7 +489,7 @@ impl Program {
             NodeKind::Union => {
                 if mode == Mode::Nearest {
                     if let Some(s) = f.acc.as_slice().first() {
-                        if s.s0.is_real() && s.t0 < f.valid {
+                        if s.s0.is_real() && s.t0 < f.tmax {
                             f.valid = s.t0;
                             f.tmax = f.tmax.min(s.t0);
                             f.acc.truncate_at(s.t0);

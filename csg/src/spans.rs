@@ -154,14 +154,16 @@ pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
         let (tb, sb) = if ib < nb { event(b, ib) } else { (f32::INFINITY, Surf::NONE) };
         let sb = if flip_b { sb.flip() } else { sb };
         let (t, surf);
-        if ia < na && ib < nb && (ta - tb).abs() <= eps {
+        let (a_ok, b_ok) = (ia < na, ib < nb);
+        // `ta == tb` also fuses two infinite ends (inf - inf is NaN).
+        if a_ok && b_ok && (ta == tb || (ta - tb).abs() <= eps) {
             ina = !ina;
             inb = !inb;
             ia += 1;
             ib += 1;
             t = ta;
             surf = if sa.is_real() || !sb.is_real() { sa } else { sb };
-        } else if ta < tb {
+        } else if a_ok && (!b_ok || ta < tb) {
             ina = !ina;
             ia += 1;
             t = ta;

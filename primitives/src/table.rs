@@ -475,8 +475,9 @@ impl LeafTable {
 /// Clips `[t0, t1]` to `[tmin, tmax]` and pushes it if it keeps a positive length.
 #[inline(always)]
 pub fn push_clipped<S: SpanSink + ?Sized>(out: &mut S, t0: f32, s0: Surf, t1: f32, s1: Surf, tmin: f32, tmax: f32) {
-    let (t0, s0) = if t0 < tmin { (tmin, Surf::NONE) } else { (t0, s0) };
-    let (t1, s1) = if t1 > tmax { (tmax, Surf::NONE) } else { (t1, s1) };
+    // Ends beyond the range, or at infinity (a half-space), are not surfaces.
+    let (t0, s0) = if t0 < tmin || !t0.is_finite() { (t0.max(tmin), Surf::NONE) } else { (t0, s0) };
+    let (t1, s1) = if t1 > tmax || !t1.is_finite() { (t1.min(tmax), Surf::NONE) } else { (t1, s1) };
     if t1 > t0 {
         out.push_span(Span { t0, t1, s0, s1 });
     }

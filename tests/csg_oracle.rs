@@ -1,0 +1,92 @@
+//! Random CSG trees (all ops, all leaves, random affine maps on any node)
+//! against point classification of the f64 model at span midpoints, gaps and ends.
+
+use glam::DVec3;
+use rand::{rngs::SmallRng, SeedableRng};
+
+use crate::oracle::*;
+
+#[test]
+fn random_csg_spans_match_point_classification() {
+    let seed = 0xc5_9001u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut st = Check::default();
+    for case in 0..250 {
+        let tree = random_tree(&mut rng, 3);
+        let scene = bake(std::slice::from_ref(&tree));
+        let f = |p: DVec3| tree.inside(p);
+        for r in 0..30 {
+            let (o, d) = random_ray(&mut rng);
+            let ray = to_ray(o, d);
+            let spans = scene.spans(&ray, 0);
+            check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("case {case} ray {r} tree {}", tree.json()), &mut st);
+            // The nearest hit is the first real surface of the Roth diagram.
+            let hit = scene.intersect(&ray);
+            let expect = spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None });
+            assert_eq!(hit.map(|h| h.t), expect, "case {case} ray {r}: nearest hit vs spans {spans:?}");
+            // Point queries agree with the model away from surfaces.
+            let p = rp(&mut rng, 1.2);
+            let near = |p: DVec3| (0..6).any(|k| {
+                let mut e = DVec3::ZERO;
+                e[k / 2] = if k % 2 == 0 { 1e-4 } else { -1e-4 };
+                f(p + e) != f(p)
+            });
+            if !near(p) {
+                assert_eq!(scene.contains(p.as_vec3(), 0), f(p), "case {case}: contains({p:?})");
+            }
+        }
+    }
+    println!("{st:?} max span-end error {:.3e}", st.max_err);
+    assert!(st.spans > 1500);
+}
+
+#[test]
+fn wide_nodes_match_narrow_evaluation() {
+    // A difference with 200 subtrahends and a union of 150 leaves (both get BVHs)
+    // against the model; rays through the dense part.
+    let seed = 0x1de_0002u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut holes = vec![Shape::Box { min: DVec3::splat(-1.0), max: DVec3::splat(1.0) }];
+    for _ in 0..200 {
+        holes.push(Shape::Sphere { c: rp(&mut rng, 1.0), r: 0.12 });
+    }
+    let cheese = Shape::Diff(holes);
+    let mut parts = Vec::new();
+    for _ in 0..150 {
+        let l = random_leaf(&mut rng, false);
+        parts.push(match l {
+            Shape::Sphere { c, r } => Shape::Sphere { c: c * 2.0, r: r * 0.3 },
+            other => random_xf(&mut rng, other),
+        });
+    }
+    let blob = Shape::Union(parts);
+    let scene = bake(&[cheese.clone(), blob.clone()]);
+    let mut st = Check::default();
+    for (oi, s) in [cheese, blob].iter().enumerate() {
+        let f = |p: DVec3| s.inside(p);
+        for r in 0..1500 {
+            let (o, d) = random_ray(&mut rng);
+            let spans = scene.spans(&to_ray(o, d), oi as u32);
+            check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("object {oi} ray {r}"), &mut st);
+        }
+    }
+    println!("{st:?} span lists spilled so far: {}", rothray::csg::spill_count());
+}
+
+#[test]
+fn long_span_lists_spill_and_stay_correct() {
+    // 40 disjoint balls on a line: 40 spans on one ray, beyond the inline capacity.
+    let balls: Vec<Shape> = (0..40).map(|i| Shape::Sphere { c: DVec3::new(i as f64 * 0.1 - 2.0, 0.0, 0.0), r: 0.04 }).collect();
+    let u = Shape::Union(balls);
+    let scene = bake(std::slice::from_ref(&u));
+    let before = rothray::csg::spill_count();
+    let o = DVec3::new(-3.0, 0.0, 0.0);
+    let d = DVec3::X;
+    let spans = scene.spans(&to_ray(o, d), 0);
+    assert_eq!(spans.len(), 40);
+    assert!(rothray::csg::spill_count() > before, "a 40-span list must spill (inline capacity {})", rothray::csg::spans::INLINE_SPANS);
+    let mut st = Check::default();
+    check_spans(&|p| u.inside(p), o, d, 0.0, f64::INFINITY, &spans, 1e-5, "line of balls", &mut st);
+}

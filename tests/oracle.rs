@@ -1,0 +1,336 @@
+//! An independent f64 model of the scene format: point classification of every
+//! leaf kind and of CSG trees, written from the format's definitions (not from
+//! the engine's code), plus random scene generators and a span checker.
+
+use glam::{DAffine3, DVec3};
+use rand::{rngs::SmallRng, Rng};
+use rothray::engine::{Ray, RenderScene};
+use rothray::primitives::Span;
+use std::fmt::Write;
+
+#[derive(Clone, Debug)]
+pub enum Shape {
+    Sphere { c: DVec3, r: f64 },
+    Box { min: DVec3, max: DVec3 },
+    Cylinder { a: DVec3, b: DVec3, r: f64 },
+    Cone { a: DVec3, b: DVec3, ra: f64, rb: f64 },
+    Torus { c: DVec3, axis: DVec3, major: f64, minor: f64 },
+    Plane { n: DVec3, d: f64 },
+    Union(Vec<Shape>),
+    Inter(Vec<Shape>),
+    Diff(Vec<Shape>),
+    Xf { m: DAffine3, json: String, s: Box<Shape> },
+}
+
+fn v(x: DVec3) -> String {
+    format!("[{:?},{:?},{:?}]", x.x, x.y, x.z)
+}
+
+impl Shape {
+    /// Point classification (boundary = inside, to within rounding).
+    pub fn inside(&self, p: DVec3) -> bool {
+        match self {
+            Shape::Sphere { c, r } => (p - *c).length_squared() <= r * r,
+            Shape::Box { min, max } => p.cmpge(*min).all() && p.cmple(*max).all(),
+            Shape::Cylinder { a, b, r } => {
+                let ax = *b - *a;
+                let h = (p - *a).dot(ax) / ax.length_squared();
+                let radial = (p - *a) - ax * h;
+                (0.0..=1.0).contains(&h) && radial.length_squared() <= r * r
+            }
+            Shape::Cone { a, b, ra, rb } => {
+                let ax = *b - *a;
+                let h = (p - *a).dot(ax) / ax.length_squared();
+                let radial = (p - *a) - ax * h;
+                let r = ra + (rb - ra) * h;
+                (0.0..=1.0).contains(&h) && radial.length() <= r
+            }
+            Shape::Torus { c, axis, major, minor } => {
+                let w = axis.normalize();
+                let q = p - *c;
+                let z = q.dot(w);
+                let rad = (q - w * z).length();
+                (rad - major).powi(2) + z * z <= minor * minor
+            }
+            Shape::Plane { n, d } => n.dot(p) <= *d,
+            Shape::Union(c) => c.iter().any(|s| s.inside(p)),
+            Shape::Inter(c) => c.iter().all(|s| s.inside(p)),
+            Shape::Diff(c) => c[0].inside(p) && !c[1..].iter().any(|s| s.inside(p)),
+            Shape::Xf { m, s, .. } => s.inside(m.inverse().transform_point3(p)),
+        }
+    }
+
+    pub fn json(&self) -> String {
+        match self {
+            Shape::Sphere { c, r } => format!("{{\"sphere\":{{\"center\":{},\"radius\":{r:?}}}}}", v(*c)),
+            Shape::Box { min, max } => format!("{{\"box\":{{\"min\":{},\"max\":{}}}}}", v(*min), v(*max)),
+            Shape::Cylinder { a, b, r } => {
+                format!("{{\"cylinder\":{{\"a\":{},\"b\":{},\"radius\":{r:?}}}}}", v(*a), v(*b))
+            }
+            Shape::Cone { a, b, ra, rb } => format!(
+                "{{\"cone\":{{\"a\":{},\"b\":{},\"radius_a\":{ra:?},\"radius_b\":{rb:?}}}}}",
+                v(*a),
+                v(*b)
+            ),
+            Shape::Torus { c, axis, major, minor } => format!(
+                "{{\"torus\":{{\"center\":{},\"axis\":{},\"major\":{major:?},\"minor\":{minor:?}}}}}",
+                v(*c),
+                v(*axis)
+            ),
+            Shape::Plane { n, d } => format!("{{\"plane\":{{\"normal\":{},\"offset\":{d:?}}}}}", v(*n)),
+            Shape::Union(c) | Shape::Inter(c) | Shape::Diff(c) => {
+                let k = match self {
+                    Shape::Union(_) => "union",
+                    Shape::Inter(_) => "intersection",
+                    _ => "difference",
+                };
+                let mut s = format!("{{\"{k}\":[");
+                for (i, x) in c.iter().enumerate() {
+                    if i > 0 {
+                        s.push(',');
+                    }
+                    s.push_str(&x.json());
+                }
+                s.push_str("]}");
+                s
+            }
+            Shape::Xf { json, s, .. } => format!("{{\"transformed\":{{{json},\"shape\":{}}}}}", s.json()),
+        }
+    }
+}
+
+/// Random point in a cube of half size `h`.
+pub fn rp(rng: &mut SmallRng, h: f64) -> DVec3 {
+    DVec3::new(rng.gen_range(-h..h), rng.gen_range(-h..h), rng.gen_range(-h..h))
+}
+
+/// A random leaf of size about 1 near the origin (planes only if `planes`).
+pub fn random_leaf(rng: &mut SmallRng, planes: bool) -> Shape {
+    let kinds = if planes { 6 } else { 5 };
+    match rng.gen_range(0..kinds) {
+        0 => Shape::Sphere { c: rp(rng, 0.5), r: rng.gen_range(0.2..1.0) },
+        1 => {
+            let a = rp(rng, 0.8);
+            let b = a + DVec3::new(rng.gen_range(0.1..1.2), rng.gen_range(0.1..1.2), rng.gen_range(0.1..1.2));
+            Shape::Box { min: a, max: b }
+        }
+        2 => Shape::Cylinder { a: rp(rng, 0.8), b: rp(rng, 0.8) + DVec3::splat(0.05), r: rng.gen_range(0.1..0.6) },
+        3 => {
+            let (mut ra, mut rb) = (rng.gen_range(0.0..0.7), rng.gen_range(0.0..0.7));
+            if rng.gen_bool(0.3) {
+                ra = 0.0;
+            } else if rng.gen_bool(0.3) {
+                rb = 0.0;
+            }
+            if ra + rb < 0.05 {
+                rb = 0.3;
+            }
+            Shape::Cone { a: rp(rng, 0.8), b: rp(rng, 0.8) + DVec3::splat(0.05), ra, rb }
+        }
+        4 => {
+            let major = rng.gen_range(0.3..0.9);
+            let minor = if rng.gen_bool(0.2) { rng.gen_range(0.01..0.05) } else { rng.gen_range(0.05..0.5) };
+            Shape::Torus { c: rp(rng, 0.4), axis: rp(rng, 1.0) + DVec3::new(0.0, 0.01, 0.0), major, minor }
+        }
+        _ => Shape::Plane { n: rp(rng, 1.0) + DVec3::new(0.0, 0.01, 0.0), d: rng.gen_range(-0.5..0.5) },
+    }
+}
+
+/// Wraps a shape in a random transform (rotation, non-uniform scale, translation, or a matrix with shear).
+pub fn random_xf(rng: &mut SmallRng, s: Shape) -> Shape {
+    if rng.gen_bool(0.3) {
+        // A general matrix with shear.
+        let mut m = glam::DMat3::from_cols(rp(rng, 1.0), rp(rng, 1.0), rp(rng, 1.0));
+        m += glam::DMat3::IDENTITY * 1.2;
+        if m.determinant().abs() < 0.2 {
+            m = glam::DMat3::IDENTITY;
+        }
+        let t = rp(rng, 0.3);
+        let a = DAffine3::from_mat3_translation(m, t);
+        let r = |i: usize| m.row(i);
+        let json = format!(
+            "\"matrix\":[{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},0,0,0,1]",
+            r(0).x, r(0).y, r(0).z, t.x, r(1).x, r(1).y, r(1).z, t.y, r(2).x, r(2).y, r(2).z, t.z
+        );
+        return Shape::Xf { m: a, json, s: Box::new(s) };
+    }
+    let t = rp(rng, 0.3);
+    let rot = DVec3::new(rng.gen_range(-180.0..180.0), rng.gen_range(-180.0..180.0), rng.gen_range(-180.0..180.0));
+    let sc = DVec3::new(rng.gen_range(0.4..1.6), rng.gen_range(0.4..1.6), rng.gen_range(0.4..1.6));
+    let m = DAffine3::from_translation(t)
+        * DAffine3::from_rotation_z(rot.z.to_radians())
+        * DAffine3::from_rotation_y(rot.y.to_radians())
+        * DAffine3::from_rotation_x(rot.x.to_radians())
+        * DAffine3::from_scale(sc);
+    let json = format!("\"translate\":{},\"rotate_deg\":{},\"scale\":{}", v(t), v(rot), v(sc));
+    Shape::Xf { m, json, s: Box::new(s) }
+}
+
+/// A random CSG tree of the given depth.
+pub fn random_tree(rng: &mut SmallRng, depth: u32) -> Shape {
+    if depth == 0 || rng.gen_bool(0.25) {
+        let planes = rng.gen_bool(0.1);
+        let l = random_leaf(rng, planes);
+        return if rng.gen_bool(0.5) { random_xf(rng, l) } else { l };
+    }
+    let n = rng.gen_range(1..4);
+    let c: Vec<Shape> = (0..n).map(|_| random_tree(rng, depth - 1)).collect();
+    let s = match rng.gen_range(0..3) {
+        0 => Shape::Union(c),
+        1 => Shape::Inter(c),
+        _ => Shape::Diff(c),
+    };
+    if rng.gen_bool(0.3) { random_xf(rng, s) } else { s }
+}
+
+/// A scene JSON with the given objects.
+pub fn scene_json(objects: &[Shape]) -> String {
+    let mut s = String::from(
+        "{\"camera\":{\"eye\":[0,0,6],\"target\":[0,0,0],\"up\":[0,1,0],\"fov_y_deg\":40},\"objects\":[",
+    );
+    for (i, o) in objects.iter().enumerate() {
+        if i > 0 {
+            s.push(',');
+        }
+        write!(s, "{{\"name\":\"o{i}\",\"shape\":{}}}", o.json()).unwrap();
+    }
+    s.push_str("]}");
+    s
+}
+
+pub fn bake(objects: &[Shape]) -> RenderScene {
+    let sf = rothray::io::parse_scene(&scene_json(objects), std::path::Path::new("test.json")).expect("scene parses");
+    RenderScene::from_world(&sf.world).expect("scene bakes")
+}
+
+/// A random ray from outside a ball of radius 3 aimed into the unit region
+/// (or, with probability 1/5, starting inside it).
+pub fn random_ray(rng: &mut SmallRng) -> (DVec3, DVec3) {
+    let target = rp(rng, 0.9);
+    let o = if rng.gen_bool(0.2) { rp(rng, 1.0) } else { rp(rng, 1.0).normalize() * 3.5 };
+    let mut d = target - o;
+    if d.length() < 1e-3 {
+        d = DVec3::X;
+    }
+    // Unnormalised on purpose: t is in units of d.
+    (o, d * rng.gen_range(0.3..2.0))
+}
+
+/// The f64 crossing nearest `t` of the predicate along the ray, by bisection in
+/// `[t - w, t + w]` (None when the predicate does not change there).
+pub fn true_crossing(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, t: f64, w: f64) -> Option<f64> {
+    let (mut a, mut b) = (t - w, t + w);
+    let fa = f(o + d * a);
+    if fa == f(o + d * b) {
+        return None;
+    }
+    for _ in 0..60 {
+        let m = 0.5 * (a + b);
+        if f(o + d * m) == fa { a = m } else { b = m }
+    }
+    Some(0.5 * (a + b))
+}
+
+/// Statistics of a span check.
+#[derive(Default, Debug)]
+pub struct Check {
+    pub rays: usize,
+    pub spans: usize,
+    pub ends: usize,
+    pub max_err: f64,
+    pub missed: usize,
+}
+
+/// Checks the engine's spans of one ray against the f64 predicate:
+/// sorted and disjoint; span midpoints inside; gaps (sampled) outside; every
+/// real end within `tol` (in units of length) of an f64 crossing.
+pub fn check_spans(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, tmin: f64, tmax: f64, spans: &[Span], tol: f64, ctx: &str, st: &mut Check) {
+    // The engine sees the ray in f32: judge it on the same ray.
+    let (o, d) = (o.as_vec3().as_dvec3(), d.as_vec3().as_dvec3());
+    st.rays += 1;
+    st.spans += spans.len();
+    let dl = d.length();
+    let tt = tol / dl; // tolerance in t
+    for w in spans.windows(2) {
+        assert!(w[0].t1 < w[1].t0, "{ctx}: spans not sorted/disjoint: {spans:?}");
+    }
+    for (k, s) in spans.iter().enumerate() {
+        let (t0, t1) = (s.t0 as f64, s.t1 as f64);
+        assert!(t0 >= tmin - 1e-9 && t1 <= tmax + 1e-9 && t0 < t1, "{ctx}: span out of range {s:?}");
+        if t1 - t0 > 4.0 * tt {
+            let m = if t1.is_finite() { 0.5 * (t0 + t1) } else { t0 + 1.0 };
+            assert!(f(o + d * m), "{ctx}: span midpoint t={m} is outside the solid; spans {spans:?}");
+        }
+        // Room on each side of each end: half the span, half the neighbouring gap, capped at tt.
+        let prev_end = if k > 0 { spans[k - 1].t1 as f64 } else { f64::NEG_INFINITY };
+        let next_start = if k + 1 < spans.len() { spans[k + 1].t0 as f64 } else { f64::INFINITY };
+        let half = 0.5 * (t1 - t0);
+        for (t, real, inward, room_out) in [
+            (t0, s.s0.is_real(), 1.0, 0.5 * (t0 - prev_end)),
+            (t1, s.s1.is_real(), -1.0, 0.5 * (next_start - t1)),
+        ] {
+            if !real {
+                continue;
+            }
+            st.ends += 1;
+            let di = tt.min(half);
+            let dout = tt.min(room_out);
+            let pin = t + inward * di;
+            let pout = t - inward * dout;
+            let (fin, fout) = (f(o + d * pin), f(o + d * pout));
+            if fin && !fout {
+                // Bisect between them for the error figure.
+                let (mut a, mut b) = (pout, pin);
+                for _ in 0..60 {
+                    let m = 0.5 * (a + b);
+                    if f(o + d * m) { b = m } else { a = m }
+                }
+                st.max_err = st.max_err.max((0.5 * (a + b) - t).abs() * dl);
+            } else if di >= 0.25 * tt && dout >= 0.25 * tt && !near_boundary(f, o + d * t, tol) {
+                panic!("{ctx}: span end t={t} is not a boundary within {tol} (inside {fin} at {pin}, outside {} at {pout}); spans {spans:?}", !fout);
+            }
+        }
+    }
+    // Gaps: sample densely; any inside sample away from span ends is a missed span.
+    let lo = tmin.max(-1e3);
+    let hi = tmax.min(lo + 20.0 / dl);
+    let n = 400;
+    for k in 0..n {
+        let t = lo + (hi - lo) * (k as f64 + 0.5) / n as f64;
+        if spans.iter().any(|s| t >= s.t0 as f64 - 4.0 * tt && t <= s.t1 as f64 + 4.0 * tt) {
+            continue;
+        }
+        if f(o + d * t) {
+            // Inside the solid but in no span: allowed only for slivers thinner than the tolerance.
+            let thick = |dt: f64| f(o + d * (t + dt)) && f(o + d * (t - dt));
+            if thick(4.0 * tt) {
+                st.missed += 1;
+                panic!("{ctx}: t={t} is inside the solid but in no span; spans {spans:?}");
+            }
+        }
+    }
+}
+
+pub fn to_ray(o: DVec3, d: DVec3) -> Ray {
+    Ray { origin: o.as_vec3(), dir: d.as_vec3(), tmin: 0.0, tmax: f32::INFINITY }
+}
+
+/// Is `p` within `r` of the solid's boundary (both inside and outside points in the ball)?
+/// For grazing rays the crossing is ill-conditioned along the ray, but the point
+/// must still lie on the surface.
+pub fn near_boundary(f: &dyn Fn(DVec3) -> bool, p: DVec3, r: f64) -> bool {
+    let c = f(p);
+    let n = 64;
+    for i in 0..n {
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+        let a = i as f64 * 2.399963229728653;
+        let q = (1.0 - z * z).sqrt();
+        let dir = DVec3::new(q * a.cos(), q * a.sin(), z);
+        for s in [0.25, 0.5, 1.0] {
+            if f(p + dir * r * s) != c {
+                return true;
+            }
+        }
+    }
+    false
+}
