@@ -145,7 +145,9 @@ struct Sample {
 
 fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, scratch: &mut Scratch, shadows: &mut u64) -> Sample {
     let Some(h) = hit else {
-        return Sample { rgb: s.background, depth: f32::INFINITY };
+        // AOVs keep black for "no surface" so they can be read back (leaf ids, normals).
+        let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
+        return Sample { rgb: bg, depth: f32::INFINITY };
     };
     // Face the viewer (a ray that starts inside a solid sees its inner side).
     let n = if h.normal.dot(ray.dir) > 0.0 { -h.normal } else { h.normal };
