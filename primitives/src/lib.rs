@@ -21,6 +21,7 @@ pub mod aabb;
 pub mod bvh;
 pub mod kernels;
 pub mod poly;
+pub mod sweep;
 pub mod table;
 
 pub use aabb::Aabb;
