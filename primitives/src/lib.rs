@@ -19,6 +19,7 @@
 
 pub mod aabb;
 pub mod bvh;
+pub mod gcyl;
 pub mod kernels;
 pub mod poly;
 pub mod sweep;

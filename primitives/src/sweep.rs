@@ -311,13 +311,25 @@ pub(crate) fn push_union<S: SpanSink + ?Sized>(
     leaf: u32,
     out: &mut S,
 ) {
+    push_union_slack(iv, 0.0, tmin, tmax, leaf, out)
+}
+
+/// [`push_union`], also merging spans separated by gaps of at most `slack`.
+pub(crate) fn push_union_slack<S: SpanSink + ?Sized>(
+    iv: &mut [RawSpan],
+    slack: f32,
+    tmin: f32,
+    tmax: f32,
+    leaf: u32,
+    out: &mut S,
+) {
     if iv.is_empty() {
         return;
     }
     iv.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let mut cur = iv[0];
     for &x in &iv[1..] {
-        if x.0 <= cur.2 {
+        if x.0 <= cur.2 + slack {
             if x.2 > cur.2 {
                 cur.2 = x.2;
                 cur.3 = x.3;
