@@ -104,9 +104,10 @@ pub struct GeneralizedCylinder {
 
 /// Sub-surface ids are `segment << 2 | kind`, kind one of these.
 pub mod sub {
-    /// Cap at s = 0.
+    /// The copy at the start (u = 0) of the segment: the cap at s = 0 on the
+    /// first segment, the face of the notch at a corner of the path elsewhere.
     pub const CAP0: u32 = 0;
-    /// Cap at s = 1.
+    /// The copy at the end (u = 1) of the segment (the cap at s = 1 on the last).
     pub const CAP1: u32 = 1;
     /// Side (a profile boundary point swept along the path).
     pub const SIDE: u32 = 2;
@@ -542,9 +543,9 @@ impl GenCylData {
     fn sub_at(&self, i: usize, u: f64, fold: bool) -> u32 {
         let kind = if fold {
             sub::FOLD
-        } else if i == 0 && u == 0.0 {
+        } else if u == 0.0 {
             sub::CAP0
-        } else if i + 1 == self.segs.len() && u == 1.0 {
+        } else if u == 1.0 {
             sub::CAP1
         } else {
             sub::SIDE
@@ -849,8 +850,8 @@ impl GenCylData {
         let kind = sub & 3;
         let pd = p.as_dvec3();
         match kind {
-            sub::CAP0 => return (-self.segs[0].tangent(0.0)).as_vec3(),
-            sub::CAP1 => return self.segs[self.segs.len() - 1].tangent(1.0).as_vec3(),
+            sub::CAP0 => return (-self.segs[i].tangent(0.0)).as_vec3(),
+            sub::CAP1 => return self.segs[i].tangent(1.0).as_vec3(),
             _ => {}
         }
         // The foot point whose local point is nearest the profile boundary (on
