@@ -565,7 +565,7 @@ impl SweptSphereData {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::Span;
     use rand::{rngs::SmallRng, Rng, SeedableRng};
