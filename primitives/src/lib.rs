@@ -19,8 +19,10 @@
 
 pub mod aabb;
 pub mod bvh;
+pub mod gcyl;
 pub mod kernels;
 pub mod poly;
+pub mod sweep;
 pub mod table;
 
 pub use aabb::Aabb;
