@@ -20,6 +20,7 @@
 pub mod aabb;
 pub mod bvh;
 pub mod kernels;
+pub mod mesh;
 pub mod poly;
 pub mod table;
 
