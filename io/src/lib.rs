@@ -1,1 +1,3 @@
 // placeholder
+pub mod mesh;
+pub use mesh::{load_mesh, load_mesh_data, MeshLoadError};

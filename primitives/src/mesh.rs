@@ -443,7 +443,7 @@ impl MeshData {
                 return Err(MeshError::NoVolume(format!("closed surface with volume {vol:e}")));
             }
         }
-        if vol < 0.0 && (has_volume || eff == InsideRule::Winding) {
+        if vol < 0.0 && has_volume {
             orient = -1.0;
             warnings.push(format!("mesh is inside out (signed volume {vol:e}); its orientation was flipped"));
         }
