@@ -260,6 +260,12 @@ fn locate_obj_error(text: &str, e: &tobj::LoadError) -> (Option<usize>, String) 
                     return (line, format!("face with fewer than 3 vertices ({e})"));
                 }
             }
+            ("usemtl" | "mtllib", E::MaterialParseError) if args.is_empty() => {
+                return (line, format!("{tag} without a name ({e})"));
+            }
+            ("o" | "g", E::InvalidObjectName) if args.is_empty() => {
+                return (line, format!("{tag} without a name ({e})"));
+            }
             ("f", E::FaceTexCoordOutOfBounds | E::FaceNormalOutOfBounds) => {
                 let (slot, n) = if matches!(e, E::FaceTexCoordOutOfBounds) { (1, nvt) } else { (2, nvn) };
                 for a in &args {
@@ -322,6 +328,18 @@ fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
         place: place.into(),
         message,
     };
+    if bytes.starts_with(b"glTF") && bytes.get(4..8) == Some(&1u32.to_le_bytes()[..]) {
+        return Err(MeshLoadError::Unsupported { path: path.into(), place: "GLB header".into(), what: "glTF 1.0".into() });
+    }
+    if let Ok(v) = peek_version(bytes) {
+        if !v.starts_with("2.") {
+            return Err(MeshLoadError::Unsupported {
+                path: path.into(),
+                place: "asset.version".into(),
+                what: format!("glTF {v} (only 2.x)"),
+            });
+        }
+    }
     // Required extensions first, so that the message names them (the validator
     // would only say "invalid glTF").
     if let Ok(root) = peek_required_extensions(bytes) {
@@ -335,11 +353,24 @@ fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
             }
         }
     }
-    let g = gltf::Gltf::from_slice(bytes).map_err(|e| match e {
-        gltf::Error::Validation(_) => malformed("JSON", e.to_string()),
+    let g = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| match e {
         gltf::Error::Binary(_) => malformed("GLB container", e.to_string()),
         _ => malformed("JSON", e.to_string()),
     })?;
+    // gltf's validation, minus one rule: POSITION accessors without min/max are
+    // common in the wild and harmless here (we compute bounds ourselves). Every
+    // other error (notably out-of-range references, which would make gltf's
+    // iterators panic) is kept.
+    {
+        use gltf::json::validation::{Error as VError, Validate};
+        let root = g.document.as_json();
+        let mut errors = Vec::new();
+        root.validate(root, gltf::json::Path::new, &mut |path, error| errors.push((path(), error)));
+        errors.retain(|(p, e)| !(*e == VError::Missing && (p.as_str().ends_with(".min") || p.as_str().ends_with(".max"))));
+        if !errors.is_empty() {
+            return Err(malformed("JSON", gltf::Error::Validation(errors).to_string()));
+        }
+    }
     let doc = &g.document;
     let mut ctx = GltfCtx {
         path,
@@ -379,6 +410,12 @@ fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
         }
     }
     Ok((ctx.pos, ctx.tris, ctx.warnings))
+}
+
+/// `asset.version` of a .gltf (glTF 1.0 files fail to parse as 2.0 with a confusing message).
+fn peek_version(bytes: &[u8]) -> Result<String, ()> {
+    let v: serde_json::Value = serde_json::from_slice(bytes).map_err(|_| ())?;
+    Ok(v.get("asset").and_then(|a| a.get("version")).ok_or(())?.as_str().ok_or(())?.to_string())
 }
 
 fn peek_required_extensions(bytes: &[u8]) -> Result<Vec<String>, ()> {

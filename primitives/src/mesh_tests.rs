@@ -460,3 +460,82 @@ fn mesh_bad_input() {
     assert_eq!((r.vertices, r.triangles, r.boundary_edges, r.closed), (8, 12, 0, true));
     assert!((r.volume - 8.0).abs() < 1e-9 && (r.area - 24.0).abs() < 1e-9);
 }
+
+#[test]
+fn mesh_report_counts_self_intersections() {
+    // Two overlapping cubes in one mesh: closed and oriented, but crossing.
+    let (pos, tris) = cube();
+    let mut p2 = pos.clone();
+    let mut t2 = tris.clone();
+    p2.extend(pos.iter().map(|p| *p * 0.999 + Vec3::new(1.0, 0.5, 0.25)));
+    t2.extend(tris.iter().map(|t| t.map(|k| k + 8)));
+    let r = MeshData::new(p2, t2, InsideRule::Orientation).unwrap().report();
+    println!("two overlapping cubes: {r:?}");
+    assert!(r.closed && r.self_intersections.unwrap() > 0);
+    let r = MeshData::new(pos, tris, InsideRule::Orientation).unwrap().report();
+    assert_eq!(r.self_intersections, Some(0));
+    let (pos, tris) = octasphere(4);
+    assert_eq!(MeshData::new(pos, tris, InsideRule::Orientation).unwrap().report().self_intersections, Some(0));
+    // a tilted flat mesh encloses nothing
+    let flat = vec![Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 1.0), Vec3::new(1.0, 2.0, 1.0)];
+    let e = MeshData::new(flat, vec![[0, 1, 2], [1, 3, 2]], InsideRule::Winding).unwrap_err();
+    assert!(matches!(e, MeshError::NoVolume(_)), "{e}");
+}
+
+/// Throughput of closest_hit and spans on a large sphere (run with --ignored in release).
+#[test]
+#[ignore]
+fn mesh_perf() {
+    let seed = 9;
+    println!("seed {seed}");
+    for level in [6, 8, 9] {
+        let (pos, tris) = octasphere(level);
+        let t = std::time::Instant::now();
+        let m = MeshData::new(pos, tris, InsideRule::Orientation).unwrap();
+        let build = t.elapsed().as_secs_f64();
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let rays: Vec<(Vec3, Vec3)> = (0..200_000)
+            .map(|_| {
+                let o = random_dir(&mut rng).normalize() * 3.0;
+                let target = Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
+                (o, target - o)
+            })
+            .collect();
+        let t = std::time::Instant::now();
+        let mut hits = 0;
+        for &(o, d) in &rays {
+            hits += m.closest_hit(o, d, 0.0, f32::INFINITY).is_some() as usize;
+        }
+        let ch = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        let mut spans: Vec<crate::Span> = Vec::with_capacity(8);
+        let mut ns = 0;
+        for &(o, d) in &rays {
+            spans.clear();
+            m.spans(o, d, 0.0, f32::INFINITY, 0, &mut spans);
+            ns += spans.len();
+        }
+        let sp = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        let mut inside = 0;
+        for &(o, d) in rays.iter().take(20_000) {
+            inside += m.contains(o + d * 0.5) as usize;
+        }
+        let ct = t.elapsed().as_secs_f64();
+        let wt = std::time::Instant::now();
+        let mut w = 0.0;
+        for &(o, d) in rays.iter().take(20_000) {
+            w += m.winding_number(o + d * 0.5);
+        }
+        let wt = wt.elapsed().as_secs_f64();
+        let n = rays.len() as f64;
+        println!(
+            "octasphere({level}) {} tris: build {build:.3} s; closest_hit {:.2} Mrays/s ({hits} hits); spans {:.2} Mrays/s ({ns} spans); contains {:.2} M/s ({inside}); winding_number {:.3} M/s (sum {w:.0})",
+            m.triangle_count(),
+            n / ch / 1e6,
+            n / sp / 1e6,
+            20_000.0 / ct / 1e6,
+            20_000.0 / wt / 1e6
+        );
+    }
+}
