@@ -152,9 +152,8 @@ fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
     out
 }
 
-/// Both cube instances: the scaled one (volume 64) and the mirrored one, which must
-/// stay outward (a mirror flips the winding); total volume 64 + 8 * 8 = 128? No:
-/// the child inherits scale 2, so both have volume 64.
+/// Both cube instances: the scaled one (volume 64) and the mirrored child, which
+/// inherits the scale (volume 64) and must stay outward (a mirror flips the winding).
 fn check_two_cubes(p: &Path) {
     let (pos, tris, w) = load_mesh(p).unwrap();
     assert!(w.is_empty(), "{w:?}");

@@ -33,7 +33,12 @@ use std::fmt;
 use glam::{DVec3, Vec3};
 use smallvec::SmallVec;
 
-use crate::{aabb::Aabb, bvh::FlatBvh, table::push_clipped, SpanSink, Surf};
+use crate::{
+    aabb::Aabb,
+    bvh::{BvhNode, FlatBvh},
+    table::push_clipped,
+    SpanSink, Surf,
+};
 
 /// How a mesh decides what is inside (scene key `inside`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -146,8 +151,12 @@ pub struct MeshData {
     tris: Vec<[Vec3; 3]>,
     /// Slot -> triangle index in the input list.
     tri_id: Vec<u32>,
-    /// BVH over slots (`prims` is the identity).
+    /// BVH over slots (`prims` is the identity); used by the winding number.
     bvh: FlatBvh,
+    /// The same tree for ray traversal: sibling pairs in one 64-byte line each.
+    pairs: Vec<NodePair>,
+    /// Root node (`first` = its pair when inner).
+    root: BvhNode,
     /// Per BVH node (Winding rule only).
     dipoles: Vec<Dipole>,
     rule: InsideRule,
@@ -156,6 +165,39 @@ pub struct MeshData {
     bounds: Aabb,
     warnings: Vec<String>,
     report: MeshReport,
+}
+
+/// The two children of an inner node, in one cache line. Ray traversal is bound
+/// by node fetches (measured: ~30% of closest_hit time on the first load of a node
+/// box); obvhs puts sibling pairs at odd indices, so with 32-byte nodes every pair
+/// straddled two lines. An inner child's `first` is its own children's pair.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct NodePair([BvhNode; 2]);
+
+/// Re-lays the flat BVH as sibling pairs, depth first.
+fn build_pairs(nodes: &[BvhNode]) -> (Vec<NodePair>, BvhNode) {
+    let empty = BvhNode { min: Vec3::ZERO, first: 0, max: Vec3::ZERO, count: 0 };
+    let Some(&root) = nodes.first() else { return (vec![], BvhNode { count: 0, ..empty }) };
+    if root.count > 0 {
+        return (vec![], root);
+    }
+    let mut pairs = vec![NodePair([empty; 2])];
+    let mut stack = vec![(0usize, 0usize)]; // (old inner node, its pair)
+    while let Some((old, pi)) = stack.pop() {
+        let f = nodes[old].first as usize;
+        for k in 0..2 {
+            let mut c = nodes[f + k];
+            if c.count == 0 {
+                let np = pairs.len();
+                pairs.push(NodePair([empty; 2]));
+                stack.push((f + k, np));
+                c.first = np as u32;
+            }
+            pairs[pi].0[k] = c;
+        }
+    }
+    (pairs, BvhNode { first: 0, ..root })
 }
 
 /// One signed crossing of a ray with the surface.
@@ -218,14 +260,14 @@ impl RayBox {
 
     /// Entry parameter of the ray into the node's box within `[tlo, thi]`, conservatively.
     #[inline(always)]
-    fn hit(&self, n: &crate::bvh::BvhNode, tlo: f32, thi: f32) -> Option<f32> {
+    fn hit(&self, n: &BvhNode, tlo: f32, thi: f32) -> Option<f32> {
         self.range(n, tlo, thi).map(|r| r.0)
     }
 
     /// Parameter range of the ray in the node's box within `[tlo, thi]` (exact
     /// slab values; the acceptance test is conservative).
     #[inline(always)]
-    fn range(&self, n: &crate::bvh::BvhNode, tlo: f32, thi: f32) -> Option<(f32, f32)> {
+    fn range(&self, n: &BvhNode, tlo: f32, thi: f32) -> Option<(f32, f32)> {
         let mut t1 = (n.min - self.o) * self.inv;
         let mut t2 = (n.max - self.o) * self.inv;
         if self.zero {
@@ -488,10 +530,13 @@ impl MeshData {
         for (k, p) in bvh.prims.iter_mut().enumerate() {
             *p = k as u32;
         }
+        let (pairs, root) = build_pairs(&bvh.nodes);
         let mut m = MeshData {
             tris,
             tri_id,
             bvh,
+            pairs,
+            root,
             dipoles: Vec::new(),
             rule: eff,
             orient,
@@ -596,28 +641,31 @@ impl MeshData {
     fn for_each_crossing(&self, o: Vec3, d: Vec3, tlo: f32, thi: f32, mut f: impl FnMut(Crossing)) {
         let r = WoopRay::new(o, d);
         let rb = RayBox::new(o, d);
-        let nodes = &self.bvh.nodes[..];
-        if nodes.is_empty() || rb.hit(&nodes[0], tlo, thi).is_none() {
+        let mut leaf = |n: &BvhNode| {
+            for slot in n.first..n.first + n.count {
+                if let Some((t, front)) = intersect(&r, &self.tris[slot as usize], tlo, thi) {
+                    f(Crossing { t, slot, front });
+                }
+            }
+        };
+        if self.tris.is_empty() || rb.hit(&self.root, tlo, thi).is_none() {
             return;
+        }
+        if self.root.count > 0 {
+            return leaf(&self.root);
         }
         // All hits: no ordering, no pruning.
         let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
         stack.push(0);
-        while let Some(ni) = stack.pop() {
-            let n = &nodes[ni as usize];
-            if n.count > 0 {
-                for slot in n.first..n.first + n.count {
-                    if let Some((t, front)) = intersect(&r, &self.tris[slot as usize], tlo, thi) {
-                        f(Crossing { t, slot, front });
+        while let Some(pi) = stack.pop() {
+            for n in &self.pairs[pi as usize].0 {
+                if rb.hit(n, tlo, thi).is_some() {
+                    if n.count > 0 {
+                        leaf(n);
+                    } else {
+                        stack.push(n.first);
                     }
                 }
-                continue;
-            }
-            if rb.hit(&nodes[n.first as usize], tlo, thi).is_some() {
-                stack.push(n.first);
-            }
-            if rb.hit(&nodes[n.first as usize + 1], tlo, thi).is_some() {
-                stack.push(n.first + 1);
             }
         }
     }
@@ -639,42 +687,61 @@ impl MeshData {
     pub fn closest_hit(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32)> {
         let r = WoopRay::new(o, d);
         let rb = RayBox::new(o, d);
-        let nodes = &self.bvh.nodes[..];
         let mut best: Option<(f32, u32)> = None;
         let mut thi = tmax;
-        let Some(t_root) = nodes.first().and_then(|n| rb.hit(n, tmin, thi)) else { return None };
-        // Front to back; nodes entered beyond the best hit so far are skipped.
+        let mut leaf = |n: &BvhNode, thi: &mut f32| {
+            for slot in n.first..n.first + n.count {
+                if let Some((t, _)) = intersect(&r, &self.tris[slot as usize], tmin, *thi) {
+                    best = Some((t, slot));
+                    *thi = t;
+                }
+            }
+        };
+        if self.tris.is_empty() {
+            return None;
+        }
+        let t_root = rb.hit(&self.root, tmin, thi)?;
+        if self.root.count > 0 {
+            leaf(&self.root, &mut thi);
+            return best;
+        }
+        // Front to back; leaves are tested as soon as their box is hit (nearer one
+        // first), inner nodes are pushed far first, and entries beyond the best hit
+        // so far are skipped when popped.
         let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
         stack.push((0, t_root));
-        while let Some((ni, tenter)) = stack.pop() {
-            if tenter > thi {
+        while let Some((pi, tenter)) = stack.pop() {
+            if tenter - tenter.abs() * SLAB_EPS > thi {
                 continue;
             }
-            let n = &nodes[ni as usize];
-            if n.count > 0 {
-                for slot in n.first..n.first + n.count {
-                    if let Some((t, _)) = intersect(&r, &self.tris[slot as usize], tmin, thi) {
-                        best = Some((t, slot));
-                        thi = t;
-                    }
+            let [a, b] = &self.pairs[pi as usize].0;
+            let ha = rb.hit(a, tmin, thi);
+            let hb = rb.hit(b, tmin, thi);
+            let (near, far, hn, hf) = match (ha, hb) {
+                (Some(ta), Some(tb)) if tb < ta => (b, a, hb, ha),
+                _ => (a, b, ha, hb),
+            };
+            if let Some(t) = hn {
+                if near.count > 0 {
+                    leaf(near, &mut thi);
+                } else if hf.is_none() || far.count > 0 {
+                    stack.push((near.first, t));
                 }
-                continue;
             }
-            let ra = rb.hit(&nodes[n.first as usize], tmin, thi);
-            let rb_ = rb.hit(&nodes[n.first as usize + 1], tmin, thi);
-            match (ra, rb_) {
-                (Some(ta), Some(tb)) => {
-                    if ta <= tb {
-                        stack.push((n.first + 1, tb));
-                        stack.push((n.first, ta));
-                    } else {
-                        stack.push((n.first, ta));
-                        stack.push((n.first + 1, tb));
+            if let Some(t) = hf {
+                if far.count > 0 {
+                    if t - t.abs() * SLAB_EPS <= thi {
+                        leaf(far, &mut thi);
                     }
+                } else {
+                    stack.push((far.first, t));
                 }
-                (Some(ta), None) => stack.push((n.first, ta)),
-                (None, Some(tb)) => stack.push((n.first + 1, tb)),
-                _ => {}
+            }
+            // both inner: the far one was pushed above, push the near one last (popped first)
+            if let (Some(t), Some(_)) = (hn, hf) {
+                if near.count == 0 && far.count == 0 {
+                    stack.push((near.first, t));
+                }
             }
         }
         best

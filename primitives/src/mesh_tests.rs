@@ -102,6 +102,9 @@ fn check_ray_closed(m: &MeshData, o: Vec3, d: Vec3, convex: Option<(&[Vec3], &[[
         }
         assert_eq!(depth, 0);
     }
+    // closest_hit (ordered, pruned traversal) == first crossing of the all-hits traversal
+    let first = xs.iter().find(|x| x.0 >= 0.0 && x.0 <= 10.0).map(|x| x.0);
+    assert_eq!(m.closest_hit(o, d, 0.0, 10.0).map(|h| h.0), first, "closest_hit, o {o:?} d {d:?}");
     if convex.is_some() {
         assert!(xs.len() <= 2, "convex mesh crossed {} times: o {o:?} d {d:?}: {xs:?}", xs.len());
     }
@@ -528,9 +531,33 @@ fn mesh_perf() {
             w += m.winding_number(o + d * 0.5);
         }
         let wt = wt.elapsed().as_secs_f64();
+        // Coherent rays: a 512 x 512 pinhole camera at distance 3 looking at the sphere.
+        let cam: Vec<(Vec3, Vec3)> = (0..512 * 512)
+            .map(|i| {
+                let (x, y) = ((i % 512) as f32 / 256.0 - 1.0, (i / 512) as f32 / 256.0 - 1.0);
+                (Vec3::new(0.0, 0.0, 3.0), Vec3::new(x * 0.45, y * 0.45, -1.0))
+            })
+            .collect();
+        let t = std::time::Instant::now();
+        let mut chits = 0;
+        for &(o, d) in &cam {
+            chits += m.closest_hit(o, d, 0.0, f32::INFINITY).is_some() as usize;
+        }
+        let cch = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        for &(o, d) in &cam {
+            spans.clear();
+            m.spans(o, d, 0.0, f32::INFINITY, 0, &mut spans);
+        }
+        let csp = t.elapsed().as_secs_f64();
+        println!(
+            "octasphere({level}) camera 512x512: closest_hit {:.2} Mrays/s ({chits} hits), spans {:.2} Mrays/s",
+            cam.len() as f64 / cch / 1e6,
+            cam.len() as f64 / csp / 1e6
+        );
         let n = rays.len() as f64;
         println!(
-            "octasphere({level}) {} tris: build {build:.3} s; closest_hit {:.2} Mrays/s ({hits} hits); spans {:.2} Mrays/s ({ns} spans); contains {:.2} M/s ({inside}); winding_number {:.3} M/s (sum {w:.0})",
+            "octasphere({level}) {} tris: build {build:.3} s; random incoherent rays: closest_hit {:.2} Mrays/s ({hits} hits); spans {:.2} Mrays/s ({ns} spans); contains {:.2} M/s ({inside}); winding_number {:.3} M/s (sum {w:.0})",
             m.triangle_count(),
             n / ch / 1e6,
             n / sp / 1e6,
@@ -538,4 +565,30 @@ fn mesh_perf() {
             20_000.0 / wt / 1e6
         );
     }
+}
+
+#[test]
+#[ignore]
+fn mesh_bvh_stats() {
+    let (pos, tris) = octasphere(6);
+    let m = MeshData::new(pos, tris, InsideRule::Orientation).unwrap();
+    let nodes = &m.bvh.nodes;
+    let leaves = nodes.iter().filter(|n| n.count > 0).count();
+    let prims: u32 = nodes.iter().filter(|n| n.count > 0).map(|n| n.count).sum();
+    // depth
+    let mut maxd = 0;
+    let mut st = vec![(0u32, 0)];
+    let mut sa = 0.0f64;
+    while let Some((i, d)) = st.pop() {
+        maxd = maxd.max(d);
+        let n = &nodes[i as usize];
+        let e = n.max - n.min;
+        sa += (e.x * e.y + e.y * e.z + e.z * e.x) as f64;
+        if n.count == 0 {
+            st.push((n.first, d + 1));
+            st.push((n.first + 1, d + 1));
+        }
+    }
+    println!("{} nodes, {leaves} leaves, {prims} prims, max depth {maxd}, sum half-area {sa:.1}", nodes.len());
+    println!("root {:?} child0 {:?} child1 {:?}", nodes[0], nodes[nodes[0].first as usize], nodes[nodes[0].first as usize + 1]);
 }
