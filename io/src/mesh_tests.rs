@@ -286,6 +286,11 @@ fn mesh_bunny_report() {
     let r = m.report();
     println!("{r:#?}");
     assert_eq!(r.triangles, 3674);
+    // Pinned: the shared bunny is a closed, consistently oriented 2-manifold.
+    assert!(r.closed && r.consistently_oriented && r.usable_as_solid && r.warnings.is_empty());
+    assert_eq!((r.boundary_edges, r.non_manifold_edges, r.self_intersections), (0, 0, Some(0)));
+    assert!((r.volume - 194.288).abs() < 0.01, "{}", r.volume);
+    assert!(m.contains(r.bounds.center()) || !m.contains(r.bounds.max + Vec3::ONE));
 }
 
 /// Every OBJ / glTF / GLB of Debian's assimp-testmodels goes through load_mesh and
