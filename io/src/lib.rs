@@ -2,13 +2,16 @@
 //!
 //! * [`scene`]: the JSON scene format, parsed into a `hecs::World` with errors
 //!   located by JSON path (`objects[2].shape.difference[1].sphere.radius`);
+//! * [`mesh`]: OBJ (tobj) and glTF 2.0 (.gltf / .glb) import of closed meshes;
 //! * [`rays`]: the `rothray trace` ray CSV;
 //! * [`write_png`]: images.
 #![warn(missing_docs)]
 
+pub mod mesh;
 pub mod rays;
 pub mod scene;
 
+pub use mesh::{load_mesh, load_mesh_data, MeshLoadError};
 pub use scene::{load_scene, parse_scene, SceneError, SceneFile};
 
 /// Writes an RGB8 image as PNG.

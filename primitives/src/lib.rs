@@ -21,6 +21,7 @@ pub mod aabb;
 pub mod bvh;
 pub mod gcyl;
 pub mod kernels;
+pub mod mesh;
 pub mod poly;
 pub mod sweep;
 pub mod table;
