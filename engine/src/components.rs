@@ -3,7 +3,15 @@
 use glam::{DAffine3, DMat4, DVec3, Vec3};
 use hecs::Entity;
 pub use rothray_csg::Op;
+pub use rothray_primitives::gcyl::{Frame, GeneralizedCylinder, Profile};
+pub use rothray_primitives::mesh::{InsideRule, MeshData};
+pub use rothray_primitives::sweep::SweptSphere;
 pub use rothray_primitives::{Cone, Cuboid, Cylinder, HalfSpace, Sphere, Torus};
+
+/// A closed triangle mesh leaf. Clone the `Arc` onto many entities to instance
+/// one mesh under many transforms: the baked scene stores it once.
+#[derive(Clone, Debug)]
+pub struct MeshSolid(pub std::sync::Arc<MeshData>);
 
 /// Placement of a node relative to its parent CSG node (or the world for an
 /// object). Any invertible affine map: non-uniform scale and shear included.

@@ -6,7 +6,14 @@ use std::cell::RefCell;
 use glam::{DAffine3, Vec3};
 use hecs::{Entity, World};
 use rothray_csg::{first_surface, Mode, Program, ProgramBuilder, RayCtx, Scratch};
-use rothray_primitives::{bvh::FlatBvh, Aabb, LeafError, LeafShape, LeafTable, Span, Surf};
+use rothray_primitives::{
+    bvh::FlatBvh,
+    gcyl::GenCylData,
+    sweep::SweptSphereData,
+    table::LeafData,
+    Aabb, LeafError, LeafShape, LeafTable, Span, Surf,
+};
+use std::sync::Arc;
 
 use crate::components::*;
 
@@ -148,11 +155,46 @@ pub struct RenderScene {
     pub eps: f32,
     /// How many times [`sync_scene`] rebuilt the tables.
     pub bake_count: u64,
+    /// Accuracy knob of the swept-sphere and generalized-cylinder solvers, relative
+    /// to each shape's size (default 1e-6; see `rothray bench --tolerances`).
+    pub tolerance: f32,
     fingerprint: u64,
 }
 
 thread_local! {
     static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// What a leaf entity holds.
+enum LeafDesc {
+    Analytic(LeafShape),
+    Swept(SweptSphere),
+    GenCyl(GeneralizedCylinder),
+    Mesh(Arc<MeshData>),
+}
+
+fn leaf_desc(world: &World, e: Entity) -> Option<LeafDesc> {
+    if let Some(s) = leaf_shape(world, e) {
+        return Some(LeafDesc::Analytic(s));
+    }
+    let er = world.entity(e).ok()?;
+    if let Some(s) = er.get::<&SweptSphere>() {
+        return Some(LeafDesc::Swept((*s).clone()));
+    }
+    if let Some(s) = er.get::<&GeneralizedCylinder>() {
+        return Some(LeafDesc::GenCyl((*s).clone()));
+    }
+    if let Some(s) = er.get::<&MeshSolid>() {
+        return Some(LeafDesc::Mesh(s.0.clone()));
+    }
+    None
+}
+
+fn is_leaf(world: &World, e: Entity) -> bool {
+    leaf_shape(world, e).is_some()
+        || world.get::<&SweptSphere>(e).is_ok()
+        || world.get::<&GeneralizedCylinder>(e).is_ok()
+        || world.get::<&MeshSolid>(e).is_ok()
 }
 
 fn leaf_shape(world: &World, e: Entity) -> Option<LeafShape> {
@@ -179,7 +221,7 @@ fn leaf_shape(world: &World, e: Entity) -> Option<LeafShape> {
 }
 
 fn is_solid(world: &World, e: Entity) -> bool {
-    world.get::<&CsgNode>(e).is_ok() || leaf_shape(world, e).is_some()
+    world.get::<&CsgNode>(e).is_ok() || is_leaf(world, e)
 }
 
 fn name_of(world: &World, e: Entity) -> Option<String> {
@@ -214,8 +256,12 @@ pub fn fingerprint_world(world: &World) -> u64 {
             continue;
         }
         e.hash(&mut h);
-        if let Some(s) = leaf_shape(world, e) {
-            format!("{s:?}").hash(&mut h);
+        match leaf_desc(world, e) {
+            Some(LeafDesc::Mesh(m)) => (Arc::as_ptr(&m) as usize).hash(&mut h),
+            Some(LeafDesc::Analytic(s)) => format!("{s:?}").hash(&mut h),
+            Some(LeafDesc::Swept(s)) => format!("{s:?}").hash(&mut h),
+            Some(LeafDesc::GenCyl(s)) => format!("{s:?}").hash(&mut h),
+            None => {}
         }
         if let Ok(t) = world.get::<&Transform>(e) {
             for v in t.0.to_cols_array() {
@@ -276,8 +322,21 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
                     let Ok(er) = world.entity(e) else { return Err(BakeError::NotASolid { entity: e }) };
                     let global = parent * er.get::<&Transform>().map(|t| t.0).unwrap_or(DAffine3::IDENTITY);
                     let color = er.get::<&Material>().map(|m| m.color).or(color);
-                    if let Some(shape) = leaf_shape(world, e) {
-                        let idx = leaves.push(&shape, &global).map_err(|err| match err {
+                    if let Some(desc) = leaf_desc(world, e) {
+                        let bad = |error: rothray_primitives::ShapeError| BakeError::BadShape { entity: e, name: name_of(world, e), error };
+                        let pushed = match desc {
+                            LeafDesc::Analytic(shape) => leaves.push(&shape, &global),
+                            LeafDesc::Swept(d) => {
+                                let data = SweptSphereData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
+                                leaves.push_data(&LeafData::SweptSphere(Arc::new(data)), &global)
+                            }
+                            LeafDesc::GenCyl(d) => {
+                                let data = GenCylData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
+                                leaves.push_data(&LeafData::GenCylinder(Arc::new(data)), &global)
+                            }
+                            LeafDesc::Mesh(m) => leaves.push_data(&LeafData::Mesh(m), &global),
+                        };
+                        let idx = pushed.map_err(|err| match err {
                             LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
                             LeafError::SingularTransform => {
                                 BakeError::SingularTransform { entity: e, name: name_of(world, e) }
@@ -394,6 +453,10 @@ enum ProgOp {
 }
 
 impl RenderScene {
+    fn tolerance_or_default(&self) -> f32 {
+        if self.tolerance > 0.0 { self.tolerance } else { rothray_primitives::sweep::DEFAULT_TOLERANCE }
+    }
+
     /// Bakes a world into a new scene.
     pub fn from_world(world: &World) -> Result<RenderScene, BakeError> {
         let mut s = RenderScene::default();

@@ -6,9 +6,11 @@ use std::path::{Path, PathBuf};
 use glam::{DMat4, DVec3, Vec3};
 use hecs::{Entity, World};
 use rothray_engine::{
-    Camera, Cone, CsgNode, Cuboid, Cylinder, HalfSpace, Light, Material, Name, ObjectOrder, Op, Sphere, Torus,
-    Transform,
+    Camera, Cone, CsgNode, Cuboid, Cylinder, Frame, GeneralizedCylinder, HalfSpace, InsideRule, Light, Material,
+    MeshData, MeshSolid, Name, ObjectOrder, Op, Profile, Sphere, SweptSphere, Torus, Transform,
 };
+use std::collections::HashMap;
+use std::sync::Arc;
 use rothray_primitives::LeafShape;
 use serde::Deserialize;
 use serde_json::{Map, Value};
@@ -78,6 +80,7 @@ struct Ctx<'a> {
     world: World,
     names: std::collections::HashSet<String>,
     warnings: Vec<String>,
+    meshes: HashMap<(PathBuf, bool), Arc<MeshData>>,
 }
 
 type R<T> = Result<T, SceneError>;
@@ -130,12 +133,6 @@ impl Ctx<'_> {
         }
         Ok(c.as_vec3())
     }
-    fn field<'v>(&self, m: &'v Map<String, Value>, k: &str, at: &str) -> R<&'v Value> {
-        match m.get(k) {
-            Some(v) => Ok(v),
-            None => self.err(at, format!("missing field `{k}`")),
-        }
-    }
     fn name(&mut self, v: &Value, at: &str) -> R<String> {
         let Some(s) = v.as_str() else { return self.err(at, format!("expected a string, got {}", kind_of(v))) };
         if s.is_empty() {
@@ -163,7 +160,8 @@ fn kind_of(v: &Value) -> &'static str {
     }
 }
 
-const LEAF_KINDS: &[&str] = &["sphere", "box", "cylinder", "cone", "torus", "plane"];
+const LEAF_KINDS: &[&str] =
+    &["sphere", "box", "cylinder", "cone", "torus", "plane", "swept_sphere", "generalized_cylinder", "mesh"];
 const NODE_KINDS: &[&str] = &["union", "intersection", "difference", "transformed"];
 
 /// Loads a scene file (mesh paths are relative to it). Runs on a thread with a
@@ -197,7 +195,7 @@ fn parse_scene_inner(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
         .and_then(|v| de.end().map(|_| v))
         .map_err(|e| SceneError::Json { file: file.clone(), line: e.line(), column: e.column(), message: e.to_string() })?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut cx = Ctx { file, dir, world: World::new(), names: Default::default(), warnings: Vec::new() };
+    let mut cx = Ctx { file, dir, world: World::new(), names: Default::default(), warnings: Vec::new(), meshes: HashMap::new() };
     let res = parse_root(&mut cx, &root, path);
     // Deep trees drop recursively: do it here, on the big stack.
     drop(root);
@@ -419,6 +417,24 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str, _inherited: Option<Vec3>) -> R
             // A transformed node is a one-child union carrying the transform.
             cx.world.spawn((CsgNode::union([child]), t))
         }
+        "swept_sphere" => {
+            let desc = parse_sweep(cx, body, &kat)?;
+            let e = cx.world.spawn((desc,));
+            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
+            e
+        }
+        "generalized_cylinder" => {
+            let desc = parse_gcyl(cx, body, &kat)?;
+            let e = cx.world.spawn((desc,));
+            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
+            e
+        }
+        "mesh" => {
+            let m = parse_mesh(cx, body, &kat)?;
+            let e = cx.world.spawn((MeshSolid(m),));
+            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
+            e
+        }
         _ if LEAF_KINDS.contains(&kind.as_str()) => {
             let shape = parse_leaf(cx, &kind, body, &kat)?;
             if let Err(e) = shape.validate() {
@@ -505,4 +521,103 @@ fn parse_leaf(cx: &mut Ctx, kind: &str, body: &Value, at: &str) -> R<LeafShape> 
         }
         _ => unreachable!("checked by the caller"),
     })
+}
+
+fn parse_points<const N: usize>(cx: &Ctx, v: &Value, at: &str) -> R<Vec<[f32; N]>> {
+    let Some(a) = v.as_array() else { return cx.err(at, format!("expected an array of points, got {}", kind_of(v))) };
+    let mut out = Vec::with_capacity(a.len());
+    for (i, p) in a.iter().enumerate() {
+        let pat = format!("{at}[{i}]");
+        let Some(q) = p.as_array() else { return cx.err(&pat, format!("expected an array of {N} numbers, got {}", kind_of(p))) };
+        if q.len() != N {
+            return cx.err(&pat, format!("expected {N} numbers, got {}", q.len()));
+        }
+        let mut x = [0.0f32; N];
+        for k in 0..N {
+            x[k] = cx.num(&q[k], &format!("{pat}[{k}]"))? as f32;
+        }
+        out.push(x);
+    }
+    Ok(out)
+}
+
+fn parse_sweep(cx: &mut Ctx, body: &Value, at: &str) -> R<SweptSphere> {
+    let m = cx.obj(body, at)?;
+    cx.keys(m, at, &["bezier"], &["bezier"])?;
+    let bezier = parse_points::<4>(cx, &m["bezier"], &join(at, "bezier"))?;
+    let d = SweptSphere { bezier };
+    if let Err(e) = d.validate() {
+        return cx.err(&join(at, e.field), e.message);
+    }
+    // Build once here so that numeric problems are reported with their place.
+    if let Err(e) = rothray_primitives::sweep::SweptSphereData::new(&d, rothray_primitives::sweep::DEFAULT_TOLERANCE) {
+        return cx.err(&join(at, e.field), e.message);
+    }
+    Ok(d)
+}
+
+fn parse_gcyl(cx: &mut Ctx, body: &Value, at: &str) -> R<GeneralizedCylinder> {
+    let m = cx.obj(body, at)?;
+    cx.keys(m, at, &["path", "profile", "frame", "normal", "twist_deg"], &["path", "profile"])?;
+    let path = parse_points::<3>(cx, &m["path"], &join(at, "path"))?;
+    let pat = join(at, "profile");
+    let pm = cx.obj(&m["profile"], &pat)?;
+    cx.keys(pm, &pat, &["circle", "polygon"], &[])?;
+    let profile = match (pm.get("circle"), pm.get("polygon")) {
+        (Some(c), None) => Profile::Circle(cx.num(c, &join(&pat, "circle"))? as f32),
+        (None, Some(p)) => Profile::Polygon(parse_points::<2>(cx, p, &join(&pat, "polygon"))?),
+        _ => return cx.err(&pat, "expected exactly one of `circle` or `polygon`"),
+    };
+    let frame = match m.get("frame") {
+        None => Frame::RotationMinimizing,
+        Some(Value::String(f)) if f == "rotation_minimizing" => Frame::RotationMinimizing,
+        Some(Value::String(f)) if f == "frenet" => Frame::Frenet,
+        Some(v) => return cx.err(&join(at, "frame"), format!("expected \"frenet\" or \"rotation_minimizing\", got {v}")),
+    };
+    let normal = match m.get("normal") {
+        Some(v) => Some(cx.vec3(v, &join(at, "normal"))?.as_vec3()),
+        None => None,
+    };
+    let twist_deg = match m.get("twist_deg") {
+        Some(v) => cx.num(v, &join(at, "twist_deg"))? as f32,
+        None => 0.0,
+    };
+    let d = GeneralizedCylinder { path, profile, frame, normal, twist_deg };
+    if let Err(e) = d.validate() {
+        return cx.err(&join(at, e.field), e.message);
+    }
+    if let Err(e) = rothray_primitives::gcyl::GenCylData::new(&d, rothray_primitives::gcyl::DEFAULT_TOLERANCE) {
+        return cx.err(&join(at, e.field), e.message);
+    }
+    Ok(d)
+}
+
+fn parse_mesh(cx: &mut Ctx, body: &Value, at: &str) -> R<Arc<MeshData>> {
+    let m = cx.obj(body, at)?;
+    cx.keys(m, at, &["path", "inside"], &["path"])?;
+    let pat = join(at, "path");
+    let Some(rel) = m["path"].as_str() else { return cx.err(&pat, "expected a string") };
+    let winding = match m.get("inside") {
+        None => false,
+        Some(Value::String(s)) if s == "orientation" => false,
+        Some(Value::String(s)) if s == "winding" => true,
+        Some(v) => return cx.err(&join(at, "inside"), format!("expected \"orientation\" or \"winding\", got {v}")),
+    };
+    let full = cx.dir.join(rel);
+    let key = (std::fs::canonicalize(&full).unwrap_or(full.clone()), winding);
+    if let Some(d) = cx.meshes.get(&key) {
+        return Ok(d.clone());
+    }
+    let rule = if winding { InsideRule::Winding } else { InsideRule::Orientation };
+    match crate::mesh::load_mesh_data(&full, rule) {
+        Ok((data, warnings)) => {
+            for w in warnings {
+                cx.warnings.push(format!("{}: {pat}: {w}", cx.file));
+            }
+            let d = Arc::new(data);
+            cx.meshes.insert(key, d.clone());
+            Ok(d)
+        }
+        Err(e) => cx.err(&pat, e.to_string()),
+    }
 }

@@ -12,6 +12,7 @@ use obvhs::{
     aabb::Aabb as OAabb,
     cwbvh::{builder::build_cwbvh, CwBvh},
     ray::{Ray as ORay, RayHit},
+    bvh2::builder::build_bvh2,
     BvhBuildParams,
 };
 use smallvec::SmallVec;
@@ -72,6 +73,29 @@ impl FlatBvh {
             prims: cw.primitive_indices.clone(),
             cw: Some(cw),
         }
+    }
+
+    /// Builds a binary BVH (obvhs `Bvh2`: PLOC, reinsertion, collapse) and keeps its
+    /// nodes in `nodes` (inner nodes have children `first` and `first + 1`), for
+    /// callers with a traversal of their own (meshes); `traverse` walks it too.
+    pub fn build_binary(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
+        if boxes.len() <= max_leaf as usize {
+            return FlatBvh::build(boxes, max_leaf);
+        }
+        let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
+        let mut params = BvhBuildParams::medium_build();
+        params.max_prims_per_leaf = max_leaf.max(1);
+        let mut t = std::time::Duration::ZERO;
+        let b2 = build_bvh2(&oboxes, params, &mut t);
+        let nodes = b2
+            .nodes
+            .iter()
+            .map(|n| {
+                let a = n.aabb();
+                BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
+            })
+            .collect();
+        FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None }
     }
 
     /// Root box (empty for an empty BVH).

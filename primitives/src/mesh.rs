@@ -517,7 +517,7 @@ impl MeshData {
                 b
             })
             .collect();
-        let mut bvh = FlatBvh::build(&boxes, MAX_LEAF);
+        let mut bvh = FlatBvh::build_binary(&boxes, MAX_LEAF);
         let tris: Vec<[Vec3; 3]> = bvh
             .prims
             .iter()

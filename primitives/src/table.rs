@@ -1,8 +1,10 @@
 //! Leaf descriptions, their canonical forms, and the SoA leaf table the tracer reads.
 
+use std::sync::Arc;
+
 use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec4};
 
-use crate::{aabb::Aabb, kernels, Span, SpanSink, Surf};
+use crate::{aabb::Aabb, gcyl::GenCylData, kernels, mesh::MeshData, sweep::SweptSphereData, Span, SpanSink, Surf};
 
 /// Ball.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,6 +98,23 @@ pub enum LeafKind {
     Torus,
     /// Half-space, normal in `p0.xyz`, offset in `p0.w`.
     HalfSpace,
+    /// Van Wijk swept sphere (`ext` indexes [`LeafTable::sweeps`]).
+    SweptSphere,
+    /// Generalized cylinder (`ext` indexes [`LeafTable::gcyls`]).
+    GenCylinder,
+    /// Closed triangle mesh (`ext` indexes [`LeafTable::meshes`]).
+    Mesh,
+}
+
+/// The data of a leaf that is more than a few numbers (shared, immutable).
+#[derive(Clone, Debug)]
+pub enum LeafData {
+    /// A swept sphere.
+    SweptSphere(Arc<SweptSphereData>),
+    /// A generalized cylinder.
+    GenCylinder(Arc<GenCylData>),
+    /// A mesh (instancing: many leaves may share one).
+    Mesh(Arc<MeshData>),
 }
 
 /// A problem with a leaf's numbers: the field and what is wrong.
@@ -317,6 +336,8 @@ pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
             }
             b
         }
+        // Leaves with data get their bounds in `push_data`.
+        LeafKind::SweptSphere | LeafKind::GenCylinder | LeafKind::Mesh => Aabb::INFINITE,
     }
 }
 
@@ -343,6 +364,14 @@ pub struct LeafTable {
     pub p1: Vec<Vec4>,
     /// World bounds per leaf.
     pub bounds: Vec<Aabb>,
+    /// Index into the kind's own table (sweeps, gcyls, meshes); 0 for analytic leaves.
+    pub ext: Vec<u32>,
+    /// Swept spheres.
+    pub sweeps: Vec<Arc<SweptSphereData>>,
+    /// Generalized cylinders.
+    pub gcyls: Vec<Arc<GenCylData>>,
+    /// Distinct meshes (a mesh under many transforms is stored once).
+    pub meshes: Vec<Arc<MeshData>>,
 }
 
 impl LeafTable {
@@ -361,6 +390,57 @@ impl LeafTable {
         self.p0.clear();
         self.p1.clear();
         self.bounds.clear();
+        self.ext.clear();
+        self.sweeps.clear();
+        self.gcyls.clear();
+        self.meshes.clear();
+    }
+
+    fn inverse32(m: &DAffine3) -> Result<Affine3A, LeafError> {
+        let det = m.matrix3.determinant();
+        if !(det.is_finite() && det.abs() > 1e-300) || !m.translation.is_finite() {
+            return Err(LeafError::SingularTransform);
+        }
+        let inv = m.inverse();
+        let inv32 = Affine3A::from_mat3_translation(inv.matrix3.as_mat3(), inv.translation.as_vec3());
+        if !(inv32.matrix3.is_finite() && inv32.translation.is_finite()) {
+            return Err(LeafError::SingularTransform);
+        }
+        Ok(inv32)
+    }
+
+    /// Adds a leaf with shared data, placed by `world_from_node`; returns its index.
+    pub fn push_data(&mut self, data: &LeafData, world_from_node: &DAffine3) -> Result<u32, LeafError> {
+        let inv32 = Self::inverse32(world_from_node)?;
+        let m32 = Affine3A::from_mat3_translation(world_from_node.matrix3.as_mat3(), world_from_node.translation.as_vec3());
+        let (kind, ext, local) = match data {
+            LeafData::SweptSphere(d) => {
+                self.sweeps.push(d.clone());
+                (LeafKind::SweptSphere, self.sweeps.len() - 1, d.local_bounds())
+            }
+            LeafData::GenCylinder(d) => {
+                self.gcyls.push(d.clone());
+                (LeafKind::GenCylinder, self.gcyls.len() - 1, d.local_bounds())
+            }
+            LeafData::Mesh(d) => {
+                let ext = match self.meshes.iter().position(|m| Arc::ptr_eq(m, d)) {
+                    Some(i) => i,
+                    None => {
+                        self.meshes.push(d.clone());
+                        self.meshes.len() - 1
+                    }
+                };
+                (LeafKind::Mesh, ext, d.local_bounds())
+            }
+        };
+        let i = self.kind.len() as u32;
+        self.kind.push(kind);
+        self.to_local.push(inv32);
+        self.p0.push(Vec4::ZERO);
+        self.p1.push(Vec4::ZERO);
+        self.bounds.push(local.transformed(&m32));
+        self.ext.push(ext as u32);
+        Ok(i)
     }
 
     /// Adds a leaf placed by `world_from_node`; returns its index.
@@ -368,18 +448,7 @@ impl LeafTable {
         shape.validate().map_err(LeafError::Shape)?;
         let c = shape.canonical();
         let m = *world_from_node * c.node_from_local;
-        let det = m.matrix3.determinant();
-        if !(det.is_finite() && det.abs() > 1e-300) || !m.translation.is_finite() {
-            return Err(LeafError::SingularTransform);
-        }
-        let inv = m.inverse();
-        if !inv.matrix3.is_finite() || !inv.translation.is_finite() {
-            return Err(LeafError::SingularTransform);
-        }
-        let inv32 = Affine3A::from_mat3_translation(inv.matrix3.as_mat3(), inv.translation.as_vec3());
-        if !(inv32.matrix3.is_finite() && inv32.translation.is_finite()) {
-            return Err(LeafError::SingularTransform);
-        }
+        let inv32 = Self::inverse32(&m)?;
         let bounds = canonical_bounds(&c, &m);
         let i = self.kind.len() as u32;
         self.kind.push(c.kind);
@@ -387,6 +456,7 @@ impl LeafTable {
         self.p0.push(c.p0);
         self.p1.push(c.p1);
         self.bounds.push(bounds);
+        self.ext.push(0);
         Ok(i)
     }
 
@@ -412,6 +482,18 @@ impl LeafTable {
                 }
                 return;
             }
+            LeafKind::SweptSphere => {
+                self.sweeps[self.ext[iu] as usize].spans(lo, ld, tmin, tmax, i, out);
+                return;
+            }
+            LeafKind::GenCylinder => {
+                self.gcyls[self.ext[iu] as usize].spans(lo, ld, tmin, tmax, i, out);
+                return;
+            }
+            LeafKind::Mesh => {
+                self.meshes[self.ext[iu] as usize].spans(lo, ld, tmin, tmax, i, out);
+                return;
+            }
         };
         if let Some((t0, s0, t1, s1)) = r {
             push_clipped(out, t0, Surf::new(i, s0), t1, Surf::new(i, s1), tmin, tmax);
@@ -433,6 +515,9 @@ impl LeafTable {
             }
             LeafKind::Torus => kernels::torus_contains(l.as_dvec3(), p0.x as f64),
             LeafKind::HalfSpace => p0.truncate().dot(l) <= p0.w,
+            LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].contains(l),
+            LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].contains(l),
+            LeafKind::Mesh => self.meshes[self.ext[iu] as usize].contains(l),
         }
     }
 
@@ -467,6 +552,9 @@ impl LeafTable {
                 l - xy
             }
             LeafKind::HalfSpace => p0.truncate(),
+            LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].normal(sub, l),
+            LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].normal(sub, l),
+            LeafKind::Mesh => self.meshes[self.ext[iu] as usize].normal(sub, l),
         };
         (m.matrix3.transpose() * glam::Vec3A::from(nl)).normalize_or(glam::Vec3A::Y).into()
     }
