@@ -88,11 +88,30 @@ impl Aabb {
     pub fn ray_range(&self, o: Vec3, inv_d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)> {
         let t1 = (self.min - o) * inv_d;
         let t2 = (self.max - o) * inv_d;
-        // f32::min/max drop NaN (0 * inf when the origin lies on a slab of a parallel ray).
-        let tn = t1.min(t2);
-        let tf = t1.max(t2);
+        // 0 * inf is NaN when a ray parallel to a slab starts exactly on it: that
+        // ray touches the box, so NaN must widen the range, not empty it.
+        let nan1 = t1.cmpne(t1);
+        let nan2 = t2.cmpne(t2);
+        let tn = Vec3::select(nan1 | nan2, Vec3::NEG_INFINITY, t1.min(t2));
+        let tf = Vec3::select(nan1 | nan2, Vec3::INFINITY, t1.max(t2));
         let t0 = tn.x.max(tn.y).max(tn.z).max(tmin);
         let t1 = tf.x.min(tf.y).min(tf.z).min(tmax);
         if t0 <= t1 { Some((t0, t1)) } else { None }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ray_on_a_face_plane_touches_the_box() {
+        // Regression: origin exactly on the min-x face, direction parallel to it.
+        let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let o = Vec3::new(0.0, 0.5, -1.0);
+        let d = Vec3::Z;
+        assert!(b.ray_range(o, d.recip(), 0.0, 10.0).is_some());
+        let o = Vec3::new(-1e-3, 0.5, -1.0);
+        assert!(b.ray_range(o, d.recip(), 0.0, 10.0).is_none());
     }
 }

@@ -234,3 +234,53 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod small_tests {
+    use super::*;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    #[test]
+    fn small_sets_and_inside_origins() {
+        let seed = 11u64;
+        println!("seed {seed}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for n in [2usize, 3, 5, 8, 9, 17, 40, 300] {
+            for _ in 0..50 {
+                let boxes: Vec<Aabb> = (0..n)
+                    .map(|_| {
+                        let c = Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
+                        let mut h = Vec3::new(rng.gen_range(0.01..0.6), rng.gen_range(0.01..0.6), rng.gen_range(0.01..0.6));
+                        if rng.gen_bool(0.2) {
+                            h[rng.gen_range(0..3)] = 0.0;
+                        }
+                        if rng.gen_bool(0.1) {
+                            h *= 1e-4;
+                        }
+                        Aabb::new(c - h, c + h)
+                    })
+                    .collect();
+                let bvh = FlatBvh::build(&boxes, 1);
+                for _ in 0..200 {
+                    let o = Vec3::new(rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0)) * if rng.gen_bool(0.3) { 100.0 } else { 1.0 };
+                    let d = (Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) - o * 0.01) * if rng.gen_bool(0.3) { 1e-3 } else { 1.0 };
+                    let (tmin, tmax) = (0.0, if rng.gen_bool(0.5) { 10.0 } else { f32::INFINITY });
+                    let mut got = vec![];
+                    bvh.traverse(o, d.recip(), tmin, tmax, |p, _| {
+                        got.push(p);
+                        tmax
+                    });
+                    let mut sorted = got.clone();
+                    sorted.sort();
+                    sorted.dedup();
+                    assert_eq!(sorted.len(), got.len(), "n {n}: a primitive visited twice: {got:?}");
+                    for (i, b) in boxes.iter().enumerate() {
+                        if b.ray_range(o, d.recip(), tmin, tmax).is_some() {
+                            assert!(got.contains(&(i as u32)), "n {n}: missed box {i} of {boxes:?} o {o} d {d} tmax {tmax}; got {got:?}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# The test command of the README: installs what the tests need (POV-Ray 3.7 and
+# python3 for the oracle comparison, Debian's assimp test models for the mesh
+# importer corpus) when they are missing, then runs every test of the workspace.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+need=()
+command -v povray >/dev/null 2>&1 || need+=(povray)
+command -v python3 >/dev/null 2>&1 || need+=(python3)
+[ -d /usr/share/assimp/models ] || need+=(assimp-testmodels)
+if [ ${#need[@]} -gt 0 ]; then
+  echo "scripts/test.sh: installing ${need[*]} (Debian packages)"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq || true
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}" >/dev/null || {
+    echo "scripts/test.sh: could not install ${need[*]}; the POV-Ray test will fail (ROTHRAY_SKIP_POVRAY=1 skips it)" >&2
+  }
+fi
+
+# Release-mode tests: the oracles trace tens of thousands of rays.
+cargo test --workspace --release "$@"
