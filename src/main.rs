@@ -82,6 +82,23 @@ enum Cmd {
         /// Print one JSON object as the last line.
         #[arg(long)]
         json: bool,
+        /// Run time against error: a comma-separated list of solver tolerances
+        /// (swept spheres, generalized cylinders); prints trace time and the
+        /// max / RMS error of t against tolerance 1e-12, per tolerance.
+        #[arg(long, value_delimiter = ',')]
+        tolerances: Vec<f32>,
+        /// With --tolerances: write the curve as an SVG plot here.
+        #[arg(long)]
+        plot: Option<PathBuf>,
+    },
+    /// Check a mesh file (.obj, .gltf, .glb): triangles, bounds, closedness,
+    /// orientation, self-intersections, volume, usable as a solid.
+    Check {
+        /// Mesh file.
+        mesh: PathBuf,
+        /// Print the report as one JSON object.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -262,7 +279,11 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Cmd::Bench { scene, width, height, spp, repeats, json } => {
+        Cmd::Check { mesh, json } => check_mesh(&mesh, json),
+        Cmd::Bench { scene, width, height, repeats, json, tolerances, plot, .. } if !tolerances.is_empty() => {
+            bench_tolerances(&scene, width, height, repeats, &tolerances, plot.as_deref(), json)
+        }
+        Cmd::Bench { scene, width, height, spp, repeats, json, .. } => {
             let (sf, rs, bake) = load(&scene)?;
             let s = settings(&sf, width, height, spp, Aov::Shaded)?;
             let mut times = Vec::new();
@@ -313,4 +334,173 @@ fn csv(s: &str) -> String {
     } else {
         s.to_string()
     }
+}
+
+fn check_mesh(path: &Path, json: bool) -> Result<()> {
+    use rothray_primitives::mesh::{InsideRule, MeshData};
+    let (pos, tris, warnings) = rothray_io::load_mesh(path).map_err(|e| BadInput(e.to_string()))?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let data = MeshData::new(pos, tris, InsideRule::Orientation).map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
+    let r = data.report();
+    let b = r.bounds;
+    if json {
+        let j = serde_json::json!({
+            "file": path.display().to_string(),
+            "triangles": r.triangles,
+            "vertices": r.vertices,
+            "bounds": {"min": b.min.to_array(), "max": b.max.to_array()},
+            "boundary_edges": r.boundary_edges,
+            "non_manifold_edges": r.non_manifold_edges,
+            "closed": r.closed,
+            "consistently_oriented": r.consistently_oriented,
+            "self_intersections": r.self_intersections,
+            "volume": r.volume,
+            "area": r.area,
+            "usable_as_solid": r.usable_as_solid,
+            "inside_rule": format!("{:?}", r.rule).to_lowercase(),
+            "warnings": r.warnings,
+        });
+        println!("{j}");
+        return Ok(());
+    }
+    println!("file                   {}", path.display());
+    println!("triangles              {}", r.triangles);
+    println!("vertices               {}", r.vertices);
+    println!("bounds                 {:?} .. {:?}", b.min.to_array(), b.max.to_array());
+    println!("boundary edges         {}", r.boundary_edges);
+    println!("non-manifold edges     {}", r.non_manifold_edges);
+    println!("closed                 {}", if r.closed { "yes" } else { "no" });
+    println!("consistently oriented  {}", if r.consistently_oriented { "yes" } else { "no" });
+    match r.self_intersections {
+        Some(n) => println!("self-intersections     {n}"),
+        None => println!("self-intersections     not computed"),
+    }
+    println!("volume                 {:.6}", r.volume);
+    println!("area                   {:.6}", r.area);
+    println!(
+        "usable as a solid      {}",
+        if r.usable_as_solid {
+            format!("yes (inside rule: {:?})", r.rule).to_lowercase()
+        } else {
+            "no".to_string()
+        }
+    );
+    for w in &r.warnings {
+        println!("warning                {w}");
+    }
+    Ok(())
+}
+
+/// `bench --tolerances`: run time against error for the solver tolerance.
+fn bench_tolerances(
+    scene: &Path,
+    width: Option<u32>,
+    height: Option<u32>,
+    repeats: u32,
+    tols: &[f32],
+    plot: Option<&Path>,
+    json: bool,
+) -> Result<()> {
+    use rothray_engine::{bake_scene, Ray};
+    let sf = load_scene(scene).map_err(|e| BadInput(e.to_string()))?;
+    let s = settings(&sf, width, height, 1, Aov::Depth)?;
+    for &t in tols {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(BadInput(format!("--tolerances: {t} is not a positive number")).into());
+        }
+    }
+    let cam = sf.camera.rays(s.width, s.height);
+    // Error rays: a grid of camera rays (every 4th pixel each way).
+    let rays: Vec<Ray> = (0..s.height)
+        .step_by(4)
+        .flat_map(|y| (0..s.width).step_by(4).map(move |x| (x, y)))
+        .map(|(x, y)| cam.ray(x as f32 + 0.5, y as f32 + 0.5))
+        .collect();
+    let trace = |rs: &RenderScene| {
+        let mut out = vec![None; rays.len()];
+        rs.intersect_bundle(&rays, &mut out);
+        out.iter().map(|h| h.map(|h| h.t)).collect::<Vec<Option<f32>>>()
+    };
+    let mut rs = RenderScene::default();
+    rs.tolerance = 1e-12;
+    bake_scene(&sf.world, &mut rs).map_err(|e| BadInput(e.to_string()))?;
+    let reference = trace(&rs);
+    let size = rs.bounds.diagonal_length().max(1e-6) as f64;
+    let mut rows = Vec::new();
+    println!("scene {} ({}x{}), error rays {}, reference: tolerance 1e-12", scene.display(), s.width, s.height, rays.len());
+    println!("{:>10} {:>12} {:>12} {:>12} {:>10}", "tolerance", "trace_s", "max_err", "rms_err", "hit_diff");
+    for &tol in tols {
+        let mut rs = RenderScene::default();
+        rs.tolerance = tol;
+        bake_scene(&sf.world, &mut rs).map_err(|e| BadInput(e.to_string()))?;
+        let _ = render(&rs, &sf.camera, &s, &|_, _| {});
+        let mut times = Vec::new();
+        for _ in 0..repeats.max(1) {
+            let t0 = Instant::now();
+            let _ = render(&rs, &sf.camera, &s, &|_, _| {});
+            times.push(t0.elapsed().as_secs_f64());
+        }
+        times.sort_by(f64::total_cmp);
+        let med = times[times.len() / 2];
+        let got = trace(&rs);
+        let (mut max, mut sq, mut n, mut diff) = (0.0f64, 0.0f64, 0usize, 0usize);
+        for (a, b) in got.iter().zip(reference.iter()) {
+            match (a, b) {
+                (Some(a), Some(b)) => {
+                    let e = (*a as f64 - *b as f64).abs() / size;
+                    max = max.max(e);
+                    sq += e * e;
+                    n += 1;
+                }
+                (None, None) => {}
+                _ => diff += 1,
+            }
+        }
+        let rms = if n > 0 { (sq / n as f64).sqrt() } else { 0.0 };
+        println!("{tol:>10.0e} {med:>12.5} {max:>12.3e} {rms:>12.3e} {diff:>10}");
+        rows.push((tol, med, max, rms, diff));
+    }
+    if let Some(p) = plot {
+        plot_curve(p, scene, &rows).with_context(|| format!("cannot write {}", p.display()))?;
+        println!("plot: {}", p.display());
+    }
+    if json {
+        let j: Vec<serde_json::Value> = rows
+            .iter()
+            .map(|r| serde_json::json!({"tolerance": r.0, "trace_s_median": r.1, "max_err": r.2, "rms_err": r.3, "hit_miss_differs": r.4}))
+            .collect();
+        println!("{}", serde_json::json!({"scene": scene.display().to_string(), "rows": j}));
+    }
+    Ok(())
+}
+
+fn plot_curve(path: &Path, scene: &Path, rows: &[(f32, f64, f64, f64, usize)]) -> Result<()> {
+    use plotters::prelude::*;
+    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let floor = 1e-9f64;
+    let ys: Vec<f64> = rows.iter().flat_map(|r| [r.2.max(floor), r.3.max(floor)]).collect();
+    let (ylo, yhi) = (ys.iter().cloned().fold(f64::INFINITY, f64::min) / 2.0, ys.iter().cloned().fold(0.0, f64::max) * 2.0);
+    let (xlo, xhi) = (
+        rows.iter().map(|r| r.1).fold(f64::INFINITY, f64::min) * 0.9,
+        rows.iter().map(|r| r.1).fold(0.0, f64::max) * 1.1,
+    );
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("{}: trace time vs error of t", scene.file_name().unwrap_or_default().to_string_lossy()), ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(xlo..xhi, (ylo..yhi).log_scale())?;
+    chart.configure_mesh().x_desc("trace time, s (median)").y_desc("error of t / scene size").draw()?;
+    let max_pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.1, r.2.max(floor))).collect();
+    let rms_pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.1, r.3.max(floor))).collect();
+    chart.draw_series(LineSeries::new(max_pts.clone(), &RED))?.label("max").legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
+    chart.draw_series(max_pts.iter().map(|p| Circle::new(*p, 3, RED.filled())))?;
+    chart.draw_series(LineSeries::new(rms_pts.clone(), &BLUE))?.label("rms").legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
+    chart.draw_series(rows.iter().map(|r| Text::new(format!("{:.0e}", r.0), (r.1, r.2.max(floor)), ("sans-serif", 12))))?;
+    chart.configure_series_labels().background_style(WHITE).border_style(BLACK).draw()?;
+    root.present()?;
+    Ok(())
 }
