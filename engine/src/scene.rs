@@ -473,6 +473,11 @@ impl RenderScene {
         RayCtx::new(o, d, self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 })
     }
 
+    /// True when every object has finite bounds (no half-space reaches infinity).
+    pub fn all_bounded(&self) -> bool {
+        self.unbounded.is_empty()
+    }
+
     /// Object index of an entity (a top-level object).
     pub fn object_of(&self, e: Entity) -> Option<u32> {
         self.objects.iter().position(|o| o.entity == e).map(|i| i as u32)
