@@ -79,6 +79,9 @@ enum Cmd {
         /// Number of timed renders (the median is reported).
         #[arg(long, default_value_t = 7)]
         repeats: u32,
+        /// Trace camera rays only (no shadow rays), like POV-Ray at +Q0.
+        #[arg(long)]
+        no_shadows: bool,
         /// Print one JSON object as the last line.
         #[arg(long)]
         json: bool,
@@ -283,9 +286,13 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Bench { scene, width, height, repeats, json, tolerances, plot, .. } if !tolerances.is_empty() => {
             bench_tolerances(&scene, width, height, repeats, &tolerances, plot.as_deref(), json)
         }
-        Cmd::Bench { scene, width, height, spp, repeats, json, .. } => {
+        Cmd::Bench { scene, width, height, spp, repeats, json, no_shadows, .. } => {
             let (sf, rs, bake) = load(&scene)?;
-            let s = settings(&sf, width, height, spp, Aov::Shaded)?;
+            let mut s = settings(&sf, width, height, spp, Aov::Shaded)?;
+            if no_shadows {
+                s.lights.clear();
+                s.ambient = 1.0;
+            }
             let mut times = Vec::new();
             let mut stats = Default::default();
             // One warm-up render (page faults, thread pool start), then the timed ones.
@@ -313,6 +320,7 @@ fn run(cli: Cli) -> Result<()> {
                     "height": s.height,
                     "spp": s.spp,
                     "threads": rayon::current_num_threads(),
+                    "shadows": !no_shadows,
                     "rays": rays,
                     "camera_rays": stats.primary_rays,
                     "shadow_rays": stats.shadow_rays,
