@@ -747,6 +747,11 @@ impl MeshData {
         best
     }
 
+    /// [`closest_hit`](Self::closest_hit) for a bundle of 8 rays.
+    pub fn closest_hit8(&self, o: &[Vec3; 8], d: &[Vec3; 8], tmin: &[f32; 8], tmax: &[f32; 8]) -> [Option<(f32, u32)>; 8] {
+        std::array::from_fn(|k| self.closest_hit(o[k], d[k], tmin[k], tmax[k]))
+    }
+
     /// Pushes the spans of the ray `o + t d` inside the solid, clipped to
     /// `[tmin, tmax]` (sorted, disjoint; clipped ends carry [`Surf::NONE`]). Span ends
     /// carry `Surf { leaf, sub }` with `sub` = triangle slot, `| SUB_FLIP` when the
