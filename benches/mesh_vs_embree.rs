@@ -11,7 +11,9 @@
 //!
 //! `cargo bench --bench mesh_vs_embree` (or `benches/embree/run.sh`).
 //! Environment: RB_THREADS (2), RB_REPEATS (7), RB_SUBDIV (4), RB_DIR
-//! (target/embree-bench), RB_EMBREE (RB_DIR/embree_bench), RB_RANDOM (1000000).
+//! (target/embree-bench), RB_EMBREE (RB_DIR/embree_bench), RB_RANDOM (1000000),
+//! RB_METHODS (comma-separated name prefixes of the rothray methods to run; all).
+//! `binary (old)` is the scalar binary-BVH walk `closest_hit` used before the 4-wide tree.
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -168,6 +170,12 @@ fn trace1(m: &MeshData, rays: &[Ray], out: &mut [f32]) {
     }
 }
 
+fn trace_pairs(m: &MeshData, rays: &[Ray], out: &mut [f32]) {
+    for (r, t) in rays.iter().zip(out) {
+        *t = m.closest_hit_pairs(r.o, r.d, r.tmin, r.tmax).map_or(f32::INFINITY, |h| h.0);
+    }
+}
+
 fn trace8(m: &MeshData, rays: &[Ray], out: &mut [f32]) {
     for (rs, ts) in rays.chunks(8).zip(out.chunks_mut(8)) {
         if rs.len() < 8 {
@@ -287,7 +295,12 @@ fn main() {
             } else {
                 println!("(no Embree program at {}; run benches/embree/run.sh)", embree.display());
             }
-            for (name, f) in [("closest_hit", trace1 as Tracer), ("closest_hit8", trace8 as Tracer)] {
+            let methods = [("closest_hit", trace1 as Tracer), ("closest_hit8", trace8 as Tracer), ("binary (old)", trace_pairs as Tracer)];
+            let only: String = env("RB_METHODS", String::new());
+            for (name, f) in methods {
+                if !only.is_empty() && !only.split(',').any(|x| name.starts_with(x)) {
+                    continue;
+                }
                 let (med, min, ts) = bench(&pool, &m, rays, f, repeats);
                 let mr = rays.len() as f64 / med / 1e6;
                 let hits = ts.iter().filter(|t| t.is_finite()).count();
