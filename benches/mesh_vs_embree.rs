@@ -256,9 +256,11 @@ fn main() {
         pos.len(),
         m.rule() == InsideRule::Orientation
     );
+    println!("BVH: {}", m.bvh_stats());
     let mesh_path = dir.join("bunny.mesh");
     write_mesh(&mesh_path, &pos, &tris);
 
+    let only_sets: String = env("RB_SETS", String::new());
     let sets = [("camera 1920x1080", "camera", camera_rays(1920, 1080)), ("random", "random", random_rays(nrandom, b.min, b.max, 1))];
     let mut counts = vec![1];
     if threads != 1 {
@@ -266,6 +268,9 @@ fn main() {
     }
     let mut report = String::new();
     for (label, tag, rays) in &sets {
+        if !only_sets.is_empty() && !only_sets.split(',').any(|x| x == *tag) {
+            continue;
+        }
         let ray_path = dir.join(format!("{tag}.rays"));
         write_rays(&ray_path, rays);
         println!("\n== {label}: {} rays", rays.len());

@@ -115,6 +115,30 @@ impl Wide {
         w
     }
 
+    /// Node and leaf counts, mean children per node and triangles per leaf, depth.
+    pub(super) fn stats(&self) -> String {
+        let kids: usize = self.nodes.iter().map(|n| n.b[0].iter().filter(|x| x.is_finite()).count()).sum();
+        let tris: u32 = self.blocks.iter().map(|b| b.count).sum();
+        let mut depth = 0;
+        let mut st = vec![(0u32, 1)];
+        while let Some((i, d)) = st.pop() {
+            depth = depth.max(d);
+            let n = &self.nodes[i as usize];
+            for s in 0..4 {
+                if n.b[0][s].is_finite() && n.child[s] & LEAF == 0 {
+                    st.push((n.child[s], d + 1));
+                }
+            }
+        }
+        format!(
+            "{} nodes ({:.2} children each), {} leaves ({:.2} triangles each), depth {depth}",
+            self.nodes.len(),
+            kids as f64 / self.nodes.len().max(1) as f64,
+            self.blocks.len(),
+            tris as f64 / self.blocks.len().max(1) as f64
+        )
+    }
+
     pub(super) fn is_empty(&self) -> bool {
         self.nodes.is_empty()
     }
@@ -261,5 +285,64 @@ impl TriBlock {
     #[inline(always)]
     pub(super) fn exact(tris: &[[Vec3; 3]], slot: u32, r: &WoopRay, tlo: f32, thi: f32) -> Option<(f32, bool)> {
         intersect(r, &tris[slot as usize], tlo, thi)
+    }
+}
+
+/// Eight rays sharing a direction octant, SoA in two halves of four lanes, for
+/// the packet walk: each child box is tested against all eight rays at once.
+pub(super) struct Packet8 {
+    o: [[Vec4; 2]; 3],
+    inv: [[Vec4; 2]; 3],
+    near: [usize; 3],
+}
+
+impl Packet8 {
+    /// `None` when the rays do not share an octant or some direction component is
+    /// zero (the caller traces them one by one).
+    #[inline(always)]
+    pub(super) fn new(o: &[Vec3; 8], d: &[Vec3; 8]) -> Option<Packet8> {
+        let mut near = [0usize; 3];
+        for a in 0..3 {
+            let neg = d.iter().filter(|v| v[a] < 0.0).count();
+            let pos = d.iter().filter(|v| v[a] > 0.0).count();
+            if neg + pos != 8 || (neg != 0 && pos != 0) {
+                return None;
+            }
+            near[a] = (neg == 8) as usize;
+        }
+        let half = |f: &dyn Fn(usize) -> f32| [Vec4::new(f(0), f(1), f(2), f(3)), Vec4::new(f(4), f(5), f(6), f(7))];
+        Some(Packet8 {
+            o: [half(&|k| o[k].x), half(&|k| o[k].y), half(&|k| o[k].z)],
+            inv: [half(&|k| 1.0 / d[k].x), half(&|k| 1.0 / d[k].y), half(&|k| 1.0 / d[k].z)],
+            near,
+        })
+    }
+
+    /// Per child: the rays (bit k = ray k) whose `[tlo, thi]` meets its box, and
+    /// the smallest entry parameter among them.
+    #[inline(always)]
+    pub(super) fn hit(&self, n: &Node4, tlo: &[Vec4; 2], thi: &[Vec4; 2]) -> [(u32, f32); 4] {
+        let eps = Vec4::splat(SLAB_EPS);
+        std::array::from_fn(|s| {
+            let mut mask = 0u32;
+            let mut tmin = f32::INFINITY;
+            for h in 0..2 {
+                let mut lo = tlo[h];
+                let mut hi = thi[h];
+                for a in 0..3 {
+                    let near = Vec4::splat(n.b[2 * a + self.near[a]][s]);
+                    let far = Vec4::splat(n.b[2 * a + 1 - self.near[a]][s]);
+                    lo = lo.max((near - self.o[a][h]) * self.inv[a][h]);
+                    hi = hi.min((far - self.o[a][h]) * self.inv[a][h]);
+                }
+                let m = (lo - lo.abs() * eps).cmple(hi + hi.abs() * eps);
+                let bm = m.bitmask();
+                if bm != 0 {
+                    mask |= bm << (4 * h);
+                    tmin = tmin.min(Vec4::select(m, lo, Vec4::INFINITY).min_element());
+                }
+            }
+            (mask, tmin)
+        })
     }
 }
