@@ -310,10 +310,15 @@ impl Packet8 {
             }
             near[a] = (neg == 8) as usize;
         }
-        let half = |f: &dyn Fn(usize) -> f32| [Vec4::new(f(0), f(1), f(2), f(3)), Vec4::new(f(4), f(5), f(6), f(7))];
+        let ox = [Vec4::new(o[0].x, o[1].x, o[2].x, o[3].x), Vec4::new(o[4].x, o[5].x, o[6].x, o[7].x)];
+        let oy = [Vec4::new(o[0].y, o[1].y, o[2].y, o[3].y), Vec4::new(o[4].y, o[5].y, o[6].y, o[7].y)];
+        let oz = [Vec4::new(o[0].z, o[1].z, o[2].z, o[3].z), Vec4::new(o[4].z, o[5].z, o[6].z, o[7].z)];
+        let dx = [Vec4::new(d[0].x, d[1].x, d[2].x, d[3].x), Vec4::new(d[4].x, d[5].x, d[6].x, d[7].x)];
+        let dy = [Vec4::new(d[0].y, d[1].y, d[2].y, d[3].y), Vec4::new(d[4].y, d[5].y, d[6].y, d[7].y)];
+        let dz = [Vec4::new(d[0].z, d[1].z, d[2].z, d[3].z), Vec4::new(d[4].z, d[5].z, d[6].z, d[7].z)];
         Some(Packet8 {
-            o: [half(&|k| o[k].x), half(&|k| o[k].y), half(&|k| o[k].z)],
-            inv: [half(&|k| 1.0 / d[k].x), half(&|k| 1.0 / d[k].y), half(&|k| 1.0 / d[k].z)],
+            o: [ox, oy, oz],
+            inv: [dx.map(Vec4::recip), dy.map(Vec4::recip), dz.map(Vec4::recip)],
             near,
         })
     }
