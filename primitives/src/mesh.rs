@@ -30,7 +30,7 @@
 use std::collections::HashMap;
 use std::fmt;
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec4};
 use smallvec::SmallVec;
 
 use crate::{
@@ -157,6 +157,9 @@ pub struct MeshData {
     pairs: Vec<NodePair>,
     /// Root node (`first` = its pair when inner).
     root: BvhNode,
+    /// The same tree collapsed to 4 children per node, with SoA triangle blocks:
+    /// what `closest_hit` and the crossing walk traverse.
+    wide: wide::Wide,
     /// Per BVH node (Winding rule only).
     dipoles: Vec<Dipole>,
     rule: InsideRule,
@@ -531,7 +534,9 @@ impl MeshData {
             *p = k as u32;
         }
         let (pairs, root) = build_pairs(&bvh.nodes);
+        let wide = wide::Wide::build(&bvh.nodes, &tris);
         let mut m = MeshData {
+            wide,
             tris,
             tri_id,
             bvh,
@@ -639,33 +644,42 @@ impl MeshData {
     /// Calls `f` for every triangle crossing in `[tlo, thi]`, in no particular order.
     #[inline]
     fn for_each_crossing(&self, o: Vec3, d: Vec3, tlo: f32, thi: f32, mut f: impl FnMut(Crossing)) {
-        let r = WoopRay::new(o, d);
-        let rb = RayBox::new(o, d);
-        let mut leaf = |n: &BvhNode| {
-            for slot in n.first..n.first + n.count {
-                if let Some((t, front)) = intersect(&r, &self.tris[slot as usize], tlo, thi) {
-                    f(Crossing { t, slot, front });
-                }
-            }
-        };
-        if self.tris.is_empty() || rb.hit(&self.root, tlo, thi).is_none() {
+        if self.wide.is_empty() {
             return;
         }
-        if self.root.count > 0 {
-            return leaf(&self.root);
-        }
+        let r = WoopRay::new(o, d);
+        let r4 = wide::TriRay4::new(&r);
+        let rb = wide::Ray4::new(o, d);
         // All hits: no ordering, no pruning.
         let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
         stack.push(0);
-        while let Some(pi) = stack.pop() {
-            for n in &self.pairs[pi as usize].0 {
-                if rb.hit(n, tlo, thi).is_some() {
-                    if n.count > 0 {
-                        leaf(n);
-                    } else {
-                        stack.push(n.first);
+        while let Some(c) = stack.pop() {
+            if c & wide::LEAF != 0 {
+                let blk = self.wide.block(c);
+                match blk.test(&r4, tlo, thi) {
+                    wide::Block::Hits(mut m, t, det) => {
+                        while m != 0 {
+                            let l = m.trailing_zeros();
+                            m &= m - 1;
+                            f(Crossing { t: t[l as usize], slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
+                        }
+                    }
+                    wide::Block::Exact => {
+                        for slot in blk.slots() {
+                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, &r, tlo, thi) {
+                                f(Crossing { t, slot, front });
+                            }
+                        }
                     }
                 }
+                continue;
+            }
+            let n = self.wide.node(c);
+            let (mut m, _) = rb.hit(n, tlo, thi);
+            while m != 0 {
+                let s = m.trailing_zeros();
+                m &= m - 1;
+                stack.push(n.child(s));
             }
         }
     }
@@ -685,6 +699,93 @@ impl MeshData {
     /// without the facing flag). For a closed mesh that is not self-intersecting this
     /// is where the ray first meets the solid's surface. Prunes the BVH as it goes.
     pub fn closest_hit(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32)> {
+        if self.wide.is_empty() || !(tmax >= tmin) {
+            return None;
+        }
+        let r = WoopRay::new(o, d);
+        let r4 = wide::TriRay4::new(&r);
+        let rb = wide::Ray4::new(o, d);
+        let mut best: Option<(f32, u32)> = None;
+        let mut thi = tmax;
+        // Front to back: the nearest hit child is visited next, the others pushed
+        // far first; popped entries beyond the best hit so far are skipped.
+        let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
+        let mut cur = 0u32;
+        loop {
+            if cur & wide::LEAF != 0 {
+                let blk = self.wide.block(cur);
+                match blk.test(&r4, tmin, thi) {
+                    wide::Block::Hits(mut m, t, _) => {
+                        while m != 0 {
+                            let l = m.trailing_zeros();
+                            m &= m - 1;
+                            let tl = t[l as usize];
+                            if tl <= thi {
+                                thi = tl;
+                                best = Some((tl, blk.slots().start + l));
+                            }
+                        }
+                    }
+                    wide::Block::Exact => {
+                        for slot in blk.slots() {
+                            if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, &r, tmin, thi) {
+                                best = Some((t, slot));
+                                thi = t;
+                            }
+                        }
+                    }
+                }
+            } else {
+                let n = self.wide.node(cur);
+                let (m, tn) = rb.hit(n, tmin, thi);
+                if m != 0 {
+                    if m & (m - 1) == 0 {
+                        cur = n.child(m.trailing_zeros());
+                        continue;
+                    }
+                    // Two to four hits: sort by entry (descending), push all but the nearest.
+                    let mut e: SmallVec<[(u32, f32); 4]> = SmallVec::new();
+                    let mut mm = m;
+                    while mm != 0 {
+                        let s = mm.trailing_zeros();
+                        mm &= mm - 1;
+                        let item = (n.child(s), tn[s as usize]);
+                        let mut j = e.len();
+                        e.push(item);
+                        while j > 0 && e[j - 1].1 < item.1 {
+                            e[j] = e[j - 1];
+                            j -= 1;
+                        }
+                        e[j] = item;
+                    }
+                    let last = e.len() - 1;
+                    for &x in &e[..last] {
+                        stack.push(x);
+                    }
+                    cur = e[last].0;
+                    continue;
+                }
+            }
+            loop {
+                let Some((c, t)) = stack.pop() else { return best };
+                if t - t.abs() * SLAB_EPS <= thi {
+                    cur = c;
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Shape of the traversal tree (for benchmarks).
+    #[doc(hidden)]
+    pub fn bvh_stats(&self) -> String {
+        self.wide.stats()
+    }
+
+    /// The binary pair walk `closest_hit` used before the 4-wide tree (kept for
+    /// the before/after benchmark and as a test oracle).
+    #[doc(hidden)]
+    pub fn closest_hit_pairs(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32)> {
         let r = WoopRay::new(o, d);
         let rb = RayBox::new(o, d);
         let mut best: Option<(f32, u32)> = None;
@@ -745,6 +846,113 @@ impl MeshData {
             }
         }
         best
+    }
+
+    /// [`closest_hit`](Self::closest_hit) for a bundle of 8 rays, traversed
+    /// together when they share a direction octant (coherent camera rays): each
+    /// node is fetched once for the bundle and its four boxes are tested against
+    /// all eight rays; leaves test each ray that reached them. Otherwise (or
+    /// when a direction component is zero) the rays go one by one.
+    pub fn closest_hit8(&self, o: &[Vec3; 8], d: &[Vec3; 8], tmin: &[f32; 8], tmax: &[f32; 8]) -> [Option<(f32, u32)>; 8] {
+        let mut best = [None; 8];
+        if self.wide.is_empty() {
+            return best;
+        }
+        let Some(p) = wide::Packet8::new(o, d) else {
+            return std::array::from_fn(|k| self.closest_hit(o[k], d[k], tmin[k], tmax[k]));
+        };
+        let rays: [(WoopRay, wide::TriRay4); 8] = std::array::from_fn(|k| {
+            let r = WoopRay::new(o[k], d[k]);
+            (r, wide::TriRay4::new(&r))
+        });
+        let tlo4 = [Vec4::from_slice(&tmin[..4]), Vec4::from_slice(&tmin[4..])];
+        let mut thi = *tmax;
+        let mut active = 0u32;
+        for k in 0..8 {
+            if tmax[k] >= tmin[k] {
+                active |= 1 << k;
+            }
+        }
+        // (child code, rays that reached it, their smallest entry parameter)
+        let mut stack: SmallVec<[(u32, u32, f32); 64]> = SmallVec::new();
+        let (mut cur, mut mask) = (0u32, active);
+        loop {
+            if cur & wide::LEAF != 0 {
+                let blk = self.wide.block(cur);
+                let mut mm = mask;
+                while mm != 0 {
+                    let k = mm.trailing_zeros() as usize;
+                    mm &= mm - 1;
+                    let (r, r4) = &rays[k];
+                    match blk.test(r4, tmin[k], thi[k]) {
+                        wide::Block::Hits(mut m, t, _) => {
+                            while m != 0 {
+                                let l = m.trailing_zeros();
+                                m &= m - 1;
+                                let tl = t[l as usize];
+                                if tl <= thi[k] {
+                                    thi[k] = tl;
+                                    best[k] = Some((tl, blk.slots().start + l));
+                                }
+                            }
+                        }
+                        wide::Block::Exact => {
+                            for slot in blk.slots() {
+                                if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], thi[k]) {
+                                    best[k] = Some((t, slot));
+                                    thi[k] = t;
+                                }
+                            }
+                        }
+                    }
+                }
+            } else {
+                let n = self.wide.node(cur);
+                let thi4 = [Vec4::from_slice(&thi[..4]), Vec4::from_slice(&thi[4..])];
+                let h = p.hit(n, &tlo4, &thi4);
+                let mut e: SmallVec<[(u32, u32, f32); 4]> = SmallVec::new();
+                for (s, &(m, t)) in h.iter().enumerate() {
+                    let m = m & mask;
+                    if m == 0 {
+                        continue;
+                    }
+                    let item = (n.child(s as u32), m, t);
+                    let mut j = e.len();
+                    e.push(item);
+                    while j > 0 && e[j - 1].2 < item.2 {
+                        e[j] = e[j - 1];
+                        j -= 1;
+                    }
+                    e[j] = item;
+                }
+                if let Some(&(c, m, _)) = e.last() {
+                    let last = e.len() - 1;
+                    for &x in &e[..last] {
+                        stack.push(x);
+                    }
+                    (cur, mask) = (c, m);
+                    continue;
+                }
+            }
+            loop {
+                let Some((c, m, t)) = stack.pop() else { return best };
+                // `t` is at most each ray's own entry: rays whose best hit is nearer drop out.
+                let mut m2 = 0;
+                let tt = t - t.abs() * SLAB_EPS;
+                let mut mm = m;
+                while mm != 0 {
+                    let k = mm.trailing_zeros();
+                    mm &= mm - 1;
+                    if tt <= thi[k as usize] {
+                        m2 |= 1 << k;
+                    }
+                }
+                if m2 != 0 {
+                    (cur, mask) = (c, m2);
+                    break;
+                }
+            }
+        }
     }
 
     /// Pushes the spans of the ray `o + t d` inside the solid, clipped to
@@ -1023,6 +1231,9 @@ fn sort_crossings(xs: &mut [Crossing], first: impl Fn(&Crossing) -> bool) {
         }
     }
 }
+
+#[path = "mesh_wide.rs"]
+mod wide;
 
 #[cfg(test)]
 #[path = "mesh_tests.rs"]

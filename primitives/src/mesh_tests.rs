@@ -592,3 +592,49 @@ fn mesh_bvh_stats() {
     println!("{} nodes, {leaves} leaves, {prims} prims, max depth {maxd}, sum half-area {sa:.1}", nodes.len());
     println!("root {:?} child0 {:?} child1 {:?}", nodes[0], nodes[nodes[0].first as usize], nodes[nodes[0].first as usize + 1]);
 }
+
+/// The 4-wide walk, the 8-ray packet walk and the old binary walk find the same
+/// nearest crossing (coherent bundles, mixed-octant bundles, axis-aligned rays
+/// with zero direction components, rays aimed at vertices, clipped ranges).
+#[test]
+fn mesh_closest_hit8_matches_single_rays() {
+    let seed = 21u64;
+    println!("seed {seed}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    for (name, (pos, tris)) in [("cube", cube()), ("octasphere(5)", octasphere(5))] {
+        let m = MeshData::new(pos.clone(), tris.clone(), InsideRule::Orientation).unwrap();
+        let mut bundles = 0;
+        for i in 0..3000 {
+            let o = random_dir(&mut rng).normalize() * rng.gen_range(1.5..3.0);
+            let spread = if i % 3 == 0 { 2.0 } else { 0.05 };
+            let base = if i % 5 == 0 {
+                pos[rng.gen_range(0..pos.len())] - o
+            } else {
+                -o + Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5))
+            };
+            let mut d: [Vec3; 8] = std::array::from_fn(|k| {
+                if k == 0 {
+                    base
+                } else {
+                    base + Vec3::new(rng.gen_range(-spread..spread), rng.gen_range(-spread..spread), rng.gen_range(-spread..spread))
+                }
+            });
+            if i % 7 == 0 {
+                // Axis-aligned bundle (zero components).
+                d = std::array::from_fn(|k| Vec3::new(0.0, 0.0, -1.0 - k as f32 * 0.1));
+            }
+            let os: [Vec3; 8] = std::array::from_fn(|k| if i % 7 == 0 { Vec3::new(0.1 * k as f32 - 0.35, 0.2, 3.0) } else { o });
+            let tmin: [f32; 8] = std::array::from_fn(|k| if k == 3 { 0.5 } else { 0.0 });
+            let tmax: [f32; 8] = std::array::from_fn(|k| if k == 5 { 0.9 } else if k == 6 { -1.0 } else { 10.0 });
+            let h8 = m.closest_hit8(&os, &d, &tmin, &tmax);
+            for k in 0..8 {
+                let h1 = m.closest_hit(os[k], d[k], tmin[k], tmax[k]);
+                assert_eq!(h8[k].map(|h| h.0), h1.map(|h| h.0), "{name}: bundle {i} ray {k}: o {:?} d {:?}", os[k], d[k]);
+                let old = m.closest_hit_pairs(os[k], d[k], tmin[k], tmax[k]);
+                assert_eq!(old.map(|h| h.0), h1.map(|h| h.0), "{name}: old walk, bundle {i} ray {k}: o {:?} d {:?}", os[k], d[k]);
+            }
+            bundles += 1;
+        }
+        println!("{name}: {bundles} bundles agree");
+    }
+}
