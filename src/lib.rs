@@ -31,3 +31,8 @@ pub use rothray_csg as csg;
 pub use rothray_engine as engine;
 pub use rothray_io as io;
 pub use rothray_primitives as primitives;
+
+/// The README's Rust examples, compiled and run as doctests.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;

@@ -113,13 +113,15 @@ struct Frame {
     /// Length of `Scratch::cand` when the frame was pushed.
     cand_base: u32,
     done: bool,
-    acc: SpanList,
 }
 
 /// Per-thread scratch memory, reused across rays (no allocation per ray once warm).
 #[derive(Default)]
 pub struct Scratch {
     frames: Vec<Frame>,
+    /// Accumulator of the frame at each depth (kept in place: frames are pushed
+    /// and popped without moving span lists).
+    accs: Vec<SpanList>,
     cand: Vec<(u32, f32)>,
     leaf: SpanList,
     tmp: SpanList,
@@ -280,12 +282,15 @@ impl Program {
                 None => {
                     let f = scratch.frames.pop().expect("frame");
                     scratch.cand.truncate(f.cand_base as usize);
-                    if scratch.frames.len() == base {
-                        scratch.out = f.acc;
+                    let depth = scratch.frames.len();
+                    if depth == base {
+                        std::mem::swap(&mut scratch.out, &mut scratch.accs[depth]);
                         return f.valid.min(tmax);
                     }
-                    let parent = scratch.frames.len() - 1;
-                    self.absorb(parent, &f.acc, f.valid, ray, mode, scratch);
+                    let mut child = std::mem::take(&mut scratch.accs[depth]);
+                    self.absorb(depth - 1, &child, f.valid, ray, mode, scratch);
+                    child.clear();
+                    scratch.accs[depth] = child;
                 }
             }
         }
@@ -312,8 +317,12 @@ impl Program {
             valid: f32::INFINITY,
             cand_base: scratch.cand.len() as u32,
             done: false,
-            acc: SpanList::new(),
         };
+        let depth = scratch.frames.len();
+        if scratch.accs.len() <= depth {
+            scratch.accs.resize_with(depth + 1, SpanList::new);
+        }
+        scratch.accs[depth].clear();
         let n = node as usize;
         if self.bounds[n].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
             frame.done = true;
@@ -321,11 +330,15 @@ impl Program {
             && self.wide[n] != u32::MAX
             && self.wides[self.wide[n] as usize].all_leaves
         {
-            let valid = self.leaf_union(n, ray, tmin, tmax, mode, leaves, scratch, &mut frame.acc);
+            let mut acc = std::mem::take(&mut scratch.accs[depth]);
+            let valid = self.leaf_union(n, ray, tmin, tmax, mode, leaves, scratch, &mut acc);
+            scratch.accs[depth] = acc;
             frame.valid = valid;
             frame.done = true;
         } else if self.leafy[n] && self.wide[n] == u32::MAX {
-            frame.valid = self.leaf_node(n, ray, tmin, tmax, mode, leaves, scratch, &mut frame.acc);
+            let mut acc = std::mem::take(&mut scratch.accs[depth]);
+            frame.valid = self.leaf_node(n, ray, tmin, tmax, mode, leaves, scratch, &mut acc);
+            scratch.accs[depth] = acc;
             frame.done = true;
         } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX {
             let lo = scratch.cand.len();
@@ -524,8 +537,8 @@ impl Program {
                 match kind {
                     NodeKind::Union => continue,
                     NodeKind::Intersection => {
-                        f.acc.clear();
-                        f.done = true;
+                        scratch.accs[top].clear();
+                        scratch.frames[top].done = true;
                         return None;
                     }
                     _ => {
@@ -543,40 +556,41 @@ impl Program {
 
     /// Folds a child's result into frame `top`.
     fn absorb(&self, top: usize, r: &SpanList, r_valid: f32, ray: &RayCtx, mode: Mode, scratch: &mut Scratch) {
-        let Scratch { frames, tmp, .. } = scratch;
+        let Scratch { frames, accs, tmp, .. } = scratch;
         let f = &mut frames[top];
+        let acc = &mut accs[top];
         let kind = self.kind[f.node as usize];
         if r_valid < f.valid {
             f.valid = r_valid;
             f.tmax = f.tmax.min(r_valid);
-            f.acc.truncate_at(r_valid);
+            acc.truncate_at(r_valid);
         }
-        let first = f.acc.is_empty() && is_first(f, kind, self.wide[f.node as usize] != u32::MAX);
+        let first = acc.is_empty() && is_first(f, kind, self.wide[f.node as usize] != u32::MAX);
         if first {
-            f.acc.clear();
-            f.acc.0.extend_from_slice(r.as_slice());
-            f.acc.truncate_at(f.tmax);
+            acc.clear();
+            acc.0.extend_from_slice(r.as_slice());
+            acc.truncate_at(f.tmax);
         } else {
-            combine_into(kind.op(), &mut f.acc, r.as_slice(), ray.eps, tmp);
+            combine_into(kind.op(), acc, r.as_slice(), ray.eps, tmp);
         }
         match kind {
             NodeKind::Union => {
                 if mode == Mode::Nearest {
-                    if let Some(s) = f.acc.as_slice().first() {
+                    if let Some(s) = acc.as_slice().first() {
                         if s.s0.is_real() && s.t0 < f.tmax {
                             f.valid = s.t0;
                             f.tmax = f.tmax.min(s.t0);
-                            f.acc.truncate_at(s.t0);
+                            acc.truncate_at(s.t0);
                         }
                     }
                 }
             }
             NodeKind::Intersection | NodeKind::Difference => {
-                if f.acc.is_empty() {
+                if acc.is_empty() {
                     f.done = true;
                 } else {
                     // Later operands only matter over the current extent.
-                    let s = f.acc.as_slice();
+                    let s = acc.as_slice();
                     f.tmin = f.tmin.max(s[0].t0);
                     f.tmax = f.tmax.min(s[s.len() - 1].t1);
                 }
