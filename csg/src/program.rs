@@ -124,6 +124,8 @@ pub struct Scratch {
     accs: Vec<SpanList>,
     cand: Vec<(u32, f32)>,
     leaf: SpanList,
+    /// Result of a bottom-level node evaluated without a frame.
+    sub: SpanList,
     tmp: SpanList,
     /// Result of the last evaluation.
     pub out: SpanList,
@@ -275,6 +277,24 @@ impl Program {
                         // A leaf's spans are exact on the range it was asked for.
                         self.absorb(top, &leaf, f32::INFINITY, ray, mode, scratch);
                         scratch.leaf = leaf;
+                    } else if self.leafy[c as usize] {
+                        // Bottom-level inner node: evaluate in place, no frame.
+                        let cu = c as usize;
+                        let mut sub = std::mem::take(&mut scratch.sub);
+                        sub.clear();
+                        let valid = if self.bounds[cu].ray_range(ray.o, ray.inv_d, ct0, ct1).is_none() {
+                            f32::INFINITY
+                        } else if self.wide[cu] == u32::MAX {
+                            self.leaf_node(cu, ray, ct0, ct1, mode, leaves, scratch, &mut sub)
+                        } else if self.kind[cu] == NodeKind::Union {
+                            self.leaf_union(cu, ray, ct0, ct1, mode, leaves, scratch, &mut sub)
+                        } else {
+                            scratch.sub = sub;
+                            self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
+                            continue;
+                        };
+                        self.absorb(top, &sub, valid, ray, mode, scratch);
+                        scratch.sub = sub;
                     } else {
                         self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
                     }
