@@ -67,7 +67,8 @@ use smallvec::SmallVec;
 use crate::{
     aabb::Aabb,
     bvh::FlatBvh,
-    sweep::{f32_down, f32_up, push_union_slack, roots_tol, BVH_MIN_SEGMENTS},
+    poly::{bernstein_min, cubic_range, roots_in_tol},
+    sweep::{f32_down, f32_up, push_union_slack, BVH_MIN_SEGMENTS},
     ShapeError, SpanSink,
 };
 
@@ -609,12 +610,12 @@ impl GenCylData {
                 h[j + k] -= r2 * a[j] * a[k];
             }
         }
-        if -bernstein_max_neg(&h) > 0.0 {
+        if bernstein_min(&h) > 0.0 {
             return;
         }
         let utol = 1e-14;
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let nr = roots_tol(&h, 0.0, 1.0, utol, &mut roots);
+        let nr = roots_in_tol(&h, 0.0, 1.0, utol, &mut roots);
         let mut pts: SmallVec<[f64; 12]> = SmallVec::new();
         pts.push(0.0);
         for &x in &roots[..nr] {
@@ -702,7 +703,7 @@ impl GenCylData {
             if s1 > hi {
                 (hi, hi_sub) = (s1, s1_sub);
             }
-            let n = roots_tol(&sp, u0, u1, utol, &mut roots);
+            let n = roots_in_tol(&sp, u0, u1, utol, &mut roots);
             for &u in &roots[..n] {
                 if u <= u0 || u >= u1 {
                     continue;
@@ -815,7 +816,7 @@ impl GenCylData {
         out: &mut SmallVec<[(f32, u32, f32, u32); 16]>,
     ) {
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let n = roots_tol(b, 0.0, 1.0, 1e-14, &mut roots);
+        let n = roots_in_tol(b, 0.0, 1.0, 1e-14, &mut roots);
         for &u in &roots[..n] {
             let f = self.frame_at(i, u);
             let q = op - f.c;
@@ -869,7 +870,7 @@ impl GenCylData {
                 }
             }
         }
-        roots_tol(&f, 0.0, 1.0, 1e-14, out)
+        roots_in_tol(&f, 0.0, 1.0, 1e-14, out)
     }
 
     fn seg_contains(&self, i: usize, p: DVec3) -> bool {
@@ -935,41 +936,7 @@ impl GenCylData {
     }
 }
 
-/// `-max` of the Bernstein coefficients of `-h` (= min of those of `h`): a lower
-/// bound of `h` over [0, 1], returned negated so that `> 0` means "h < 0 nowhere".
-fn bernstein_max_neg(h: &[f64]) -> f64 {
-    let n = h.len() - 1;
-    let binom = |n: usize, k: usize| -> f64 {
-        let mut r = 1.0;
-        for i in 0..k {
-            r = r * (n - i) as f64 / (i + 1) as f64;
-        }
-        r
-    };
-    let mut m = f64::INFINITY;
-    for k in 0..=n {
-        let mut s = 0.0;
-        for i in 0..=k {
-            s += binom(k, i) / binom(n, i) * h[i];
-        }
-        m = m.min(s);
-    }
-    -m
-}
 
-fn cubic_range(c: &[f64; 4]) -> (f64, f64) {
-    let mut lo = eval(c, 0.0).min(eval(c, 1.0));
-    let mut hi = eval(c, 0.0).max(eval(c, 1.0));
-    let d = [c[1], 2.0 * c[2], 3.0 * c[3]];
-    let mut roots = [0.0; crate::poly::MAX_DEGREE];
-    let n = crate::poly::roots_in(&d, 0.0, 1.0, &mut roots);
-    for &u in &roots[..n] {
-        let v = eval(c, u);
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    (lo, hi)
-}
 
 /// Frame samples for all segments (see the module doc).
 fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> Vec<FrameSample> {

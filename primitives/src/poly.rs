@@ -32,36 +32,19 @@ pub fn eval_d(c: &[f64], x: f64) -> (f64, f64) {
     (p, dp)
 }
 
-/// Finds the root in `[a, b]` of a polynomial monotonic there with `f(a)`, `f(b)` of
-/// opposite signs (or one of them zero).
-fn refine(c: &[f64], mut a: f64, mut b: f64, fa: f64) -> f64 {
-    // Keep f(a) < 0 < f(b) orientation implicit through the sign of fa.
-    let neg_at_a = fa < 0.0;
-    let mut x = 0.5 * (a + b);
-    for _ in 0..100 {
-        let (f, df) = eval_d(c, x);
-        if f == 0.0 {
-            return x;
-        }
-        if (f < 0.0) == neg_at_a { a = x } else { b = x }
-        let mut nx = x - f / df;
-        if !(nx > a && nx < b) {
-            nx = 0.5 * (a + b);
-        }
-        if (nx - x).abs() <= 1e-15 * (1.0 + x.abs()) || b - a <= 1e-15 * (1.0 + a.abs().max(b.abs())) {
-            return nx;
-        }
-        x = nx;
-    }
-    x
-}
-
 /// Pushes the real roots of `c` (lowest degree first, `c.len() - 1` the degree) in
 /// `[lo, hi]` into `out` in increasing order; returns how many. Double roots where the
 /// polynomial touches zero without crossing are reported once if the touching value
-/// is exactly zero, and otherwise not at all (a tangent ray).
+/// is exactly zero, and otherwise not at all (a tangent ray). Converges to full f64
+/// precision.
 pub fn roots_in(c: &[f64], lo: f64, hi: f64, out: &mut [f64; MAX_DEGREE]) -> usize {
-    // Trim zero leading coefficients.
+    roots_in_tol(c, lo, hi, 0.0, out)
+}
+
+/// [`roots_in`] with a convergence threshold `eps` on x (the same
+/// derivative isolation, so it never misses a simple root).
+pub fn roots_in_tol(c: &[f64], lo: f64, hi: f64, eps: f64, out: &mut [f64; MAX_DEGREE]) -> usize {
+    
     let mut n = c.len();
     while n > 0 && c[n - 1] == 0.0 {
         n -= 1;
@@ -78,13 +61,33 @@ pub fn roots_in(c: &[f64], lo: f64, hi: f64, out: &mut [f64; MAX_DEGREE]) -> usi
         }
         return 0;
     }
-    // Critical points from the derivative.
+    let refine = |mut a: f64, mut b: f64, fa: f64| -> f64 {
+        let neg_at_a = fa < 0.0;
+        let mut x = 0.5 * (a + b);
+        for _ in 0..100 {
+            let (f, df) = eval_d(c, x);
+            if f == 0.0 {
+                return x;
+            }
+            if (f < 0.0) == neg_at_a { a = x } else { b = x }
+            let mut nx = x - f / df;
+            if !(nx > a && nx < b) {
+                nx = 0.5 * (a + b);
+            }
+            let tol = eps.max(1e-15 * (1.0 + x.abs()));
+            if (nx - x).abs() <= tol || b - a <= tol {
+                return nx;
+            }
+            x = nx;
+        }
+        x
+    };
     let mut d = [0.0f64; MAX_DEGREE + 1];
     for i in 1..n {
         d[i - 1] = c[i] * i as f64;
     }
     let mut crit = [0.0f64; MAX_DEGREE];
-    let nc = roots_in(&d[..n - 1], lo, hi, &mut crit);
+    let nc = roots_in_tol(&d[..n - 1], lo, hi, eps, &mut crit);
     let mut count = 0;
     let mut a = lo;
     let mut fa = eval(c, a);
@@ -104,7 +107,7 @@ pub fn roots_in(c: &[f64], lo: f64, hi: f64, out: &mut [f64; MAX_DEGREE]) -> usi
                 count += 1;
             }
         } else if fa != 0.0 && (fa < 0.0) != (fb < 0.0) {
-            let r = refine(c, a, b, fa);
+            let r = refine(a, b, fa);
             if count == 0 || out[count - 1] != r {
                 out[count] = r;
                 count += 1;
@@ -117,6 +120,44 @@ pub fn roots_in(c: &[f64], lo: f64, hi: f64, out: &mut [f64; MAX_DEGREE]) -> usi
         }
     }
     count
+}
+
+/// Largest Bernstein coefficient of `a` on [0, 1]: an upper bound of the
+/// polynomial there (convex hull property).
+pub fn bernstein_max(a: &[f64]) -> f64 {
+    bernstein_coeffs(a).fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Smallest Bernstein coefficient of `a` on [0, 1]: a lower bound there.
+pub fn bernstein_min(a: &[f64]) -> f64 {
+    bernstein_coeffs(a).fold(f64::INFINITY, f64::min)
+}
+
+fn bernstein_coeffs(a: &[f64]) -> impl Iterator<Item = f64> + '_ {
+    let n = a.len() - 1;
+    let binom = |n: usize, k: usize| -> f64 {
+        let mut r = 1.0;
+        for i in 0..k {
+            r = r * (n - i) as f64 / (i + 1) as f64;
+        }
+        r
+    };
+    (0..=n).map(move |k| (0..=k).map(|i| binom(k, i) / binom(n, i) * a[i]).sum())
+}
+
+/// Exact range of a cubic (monomial coefficients) over [0, 1].
+pub fn cubic_range(c: &[f64; 4]) -> (f64, f64) {
+    let mut lo = eval(c, 0.0).min(eval(c, 1.0));
+    let mut hi = eval(c, 0.0).max(eval(c, 1.0));
+    let d = [c[1], 2.0 * c[2], 3.0 * c[3]];
+    let mut roots = [0.0; MAX_DEGREE];
+    let n = roots_in(&d, 0.0, 1.0, &mut roots);
+    for &u in &roots[..n] {
+        let v = eval(c, u);
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    (lo, hi)
 }
 
 #[cfg(test)]

@@ -46,6 +46,10 @@
 use glam::{DVec3, Vec3};
 use smallvec::SmallVec;
 
+use crate::poly::{bernstein_max, cubic_range, roots_in_tol};
+
+/// An unmerged span `(t0, sub0, t1, sub1)`.
+type RawSpan = (f32, u32, f32, u32);
 use crate::{aabb::Aabb, bvh::FlatBvh, table::push_clipped, ShapeError, SpanSink, Surf};
 
 /// Chains with more segments than this get a BVH over their segments.
@@ -130,7 +134,7 @@ impl Seg {
             best = (1.0, g1);
         }
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let n = roots_tol(&dg[..6], 0.0, 1.0, 1e-14, &mut roots);
+        let n = roots_in_tol(&dg[..6], 0.0, 1.0, 1e-14, &mut roots);
         for &u in &roots[..n] {
             let v = eval(&g, u);
             if v < best.1 {
@@ -173,20 +177,6 @@ fn bezier_to_monomial(p: [f64; 4]) -> [f64; 4] {
     [p[0], 3.0 * (p[1] - p[0]), 3.0 * (p[0] - 2.0 * p[1] + p[2]), -p[0] + 3.0 * (p[1] - p[2]) + p[3]]
 }
 
-/// Exact range of a cubic over [0, 1].
-fn cubic_range(c: &[f64; 4]) -> (f64, f64) {
-    let mut lo = eval(c, 0.0).min(eval(c, 1.0));
-    let mut hi = eval(c, 0.0).max(eval(c, 1.0));
-    let d = [c[1], 2.0 * c[2], 3.0 * c[3]];
-    let mut roots = [0.0; crate::poly::MAX_DEGREE];
-    let n = crate::poly::roots_in(&d, 0.0, 1.0, &mut roots);
-    for &u in &roots[..n] {
-        let v = eval(c, u);
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    (lo, hi)
-}
 
 /// f64 -> f32 rounded down / up (so f32 boxes still enclose the f64 ones).
 pub(crate) fn f32_down(x: f64) -> f32 {
@@ -198,110 +188,6 @@ pub(crate) fn f32_up(x: f64) -> f32 {
     if (f as f64) < x { f.next_up() } else { f }
 }
 
-/// Upper bound of a polynomial over [0, 1]: its largest Bernstein coefficient.
-fn bernstein_max(a: &[f64]) -> f64 {
-    let n = a.len() - 1;
-    // binomials up to 10
-    let binom = |n: usize, k: usize| -> f64 {
-        let mut r = 1.0;
-        for i in 0..k {
-            r = r * (n - i) as f64 / (i + 1) as f64;
-        }
-        r
-    };
-    let mut m = f64::NEG_INFINITY;
-    for k in 0..=n {
-        let mut b = 0.0;
-        for i in 0..=k {
-            b += binom(k, i) / binom(n, i) * a[i];
-        }
-        m = m.max(b);
-    }
-    m
-}
-
-/// [`crate::poly::roots_in`] with a convergence threshold `eps` on x (the same
-/// derivative isolation, so it never misses a simple root).
-pub(crate) fn roots_tol(c: &[f64], lo: f64, hi: f64, eps: f64, out: &mut [f64; crate::poly::MAX_DEGREE]) -> usize {
-    use crate::poly::{eval_d, MAX_DEGREE};
-    let mut n = c.len();
-    while n > 0 && c[n - 1] == 0.0 {
-        n -= 1;
-    }
-    let c = &c[..n];
-    if n <= 1 || !(lo <= hi) {
-        return 0;
-    }
-    if n == 2 {
-        let r = -c[0] / c[1];
-        if r >= lo && r <= hi {
-            out[0] = r;
-            return 1;
-        }
-        return 0;
-    }
-    let refine = |mut a: f64, mut b: f64, fa: f64| -> f64 {
-        let neg_at_a = fa < 0.0;
-        let mut x = 0.5 * (a + b);
-        for _ in 0..100 {
-            let (f, df) = eval_d(c, x);
-            if f == 0.0 {
-                return x;
-            }
-            if (f < 0.0) == neg_at_a { a = x } else { b = x }
-            let mut nx = x - f / df;
-            if !(nx > a && nx < b) {
-                nx = 0.5 * (a + b);
-            }
-            if (nx - x).abs() <= eps || b - a <= eps {
-                return nx;
-            }
-            x = nx;
-        }
-        x
-    };
-    let mut d = [0.0f64; MAX_DEGREE + 1];
-    for i in 1..n {
-        d[i - 1] = c[i] * i as f64;
-    }
-    let mut crit = [0.0f64; MAX_DEGREE];
-    let nc = roots_tol(&d[..n - 1], lo, hi, eps, &mut crit);
-    let mut count = 0;
-    let mut a = lo;
-    let mut fa = eval(c, a);
-    if fa == 0.0 {
-        out[count] = a;
-        count += 1;
-    }
-    for i in 0..=nc {
-        let b = if i < nc { crit[i] } else { hi };
-        if b <= a && i < nc {
-            continue;
-        }
-        let fb = eval(c, b);
-        if fb == 0.0 {
-            if count == 0 || out[count - 1] != b {
-                out[count] = b;
-                count += 1;
-            }
-        } else if fa != 0.0 && (fa < 0.0) != (fb < 0.0) {
-            let r = refine(a, b, fa);
-            if count == 0 || out[count - 1] != r {
-                out[count] = r;
-                count += 1;
-            }
-        }
-        a = b;
-        fa = fb;
-        if count >= MAX_DEGREE {
-            break;
-        }
-    }
-    count
-}
-
-/// An unmerged span `(t0, sub0, t1, sub1)`.
-type RawSpan = (f32, u32, f32, u32);
 
 /// Sorts `iv` and pushes the union as sorted disjoint spans (clipped).
 pub(crate) fn push_union<S: SpanSink + ?Sized>(
@@ -464,7 +350,7 @@ impl SweptSphereData {
             return;
         }
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let nr = roots_tol(&dp, 0.0, 1.0, self.tol, &mut roots);
+        let nr = roots_in_tol(&dp, 0.0, 1.0, self.tol, &mut roots);
         // Breakpoints 0, roots, 1; pieces with D > 0 inside, merged into ranges.
         let mut pts: SmallVec<[f64; 8]> = SmallVec::new();
         pts.push(0.0);
@@ -517,7 +403,7 @@ impl SweptSphereData {
             let (l1, h1) = s_pm(u1);
             lo = lo.min(l1);
             hi = hi.max(h1);
-            let ne = roots_tol(&e, u0, u1, self.tol, &mut roots);
+            let ne = roots_in_tol(&e, u0, u1, self.tol, &mut roots);
             for &u in &roots[..ne] {
                 let (l, h) = s_pm(u);
                 lo = lo.min(l);
