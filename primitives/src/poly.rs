@@ -145,6 +145,48 @@ fn bernstein_coeffs(a: &[f64]) -> impl Iterator<Item = f64> + '_ {
     (0..=n).map(move |k| (0..=k).map(|i| binom(k, i) / binom(n, i) * a[i]).sum())
 }
 
+/// Is the polynomial negative on all of [0, 1]? Bernstein coefficients all
+/// negative prove it; when they do not, the control polygon is split in half (de
+/// Casteljau) up to `depth` times, which tightens the bound. Conservative: a
+/// `false` may still have no positive value.
+pub fn negative_on_unit(a: &[f64], depth: u32) -> bool {
+    let n = a.len();
+    if n == 0 || n > MAX_DEGREE + 1 {
+        return false;
+    }
+    let mut b = [0.0f64; MAX_DEGREE + 1];
+    for (k, x) in bernstein_coeffs(a).enumerate() {
+        b[k] = x;
+    }
+    bern_negative(&b[..n], depth)
+}
+
+fn bern_negative(b: &[f64], depth: u32) -> bool {
+    let n = b.len();
+    if b[0] >= 0.0 || b[n - 1] >= 0.0 {
+        return false; // a value at an end is not negative
+    }
+    if b.iter().all(|&x| x < 0.0) {
+        return true;
+    }
+    if depth == 0 {
+        return false;
+    }
+    // de Casteljau at 1/2: left and right control polygons.
+    let mut w = [0.0f64; MAX_DEGREE + 1];
+    w[..n].copy_from_slice(b);
+    let mut left = [0.0f64; MAX_DEGREE + 1];
+    let mut right = [0.0f64; MAX_DEGREE + 1];
+    for r in 0..n {
+        left[r] = w[0];
+        right[n - 1 - r] = w[n - 1 - r];
+        for i in 0..n - 1 - r {
+            w[i] = 0.5 * (w[i] + w[i + 1]);
+        }
+    }
+    bern_negative(&left[..n], depth - 1) && bern_negative(&right[..n], depth - 1)
+}
+
 /// Exact range of a cubic (monomial coefficients) over [0, 1].
 pub fn cubic_range(c: &[f64; 4]) -> (f64, f64) {
     let mut lo = eval(c, 0.0).min(eval(c, 1.0));
@@ -195,6 +237,19 @@ mod tests {
                 assert!((a - b).abs() < 1e-9, "{a} vs {b}");
             }
         }
+    }
+
+    #[test]
+    fn negative_on_unit_is_conservative_and_tightens() {
+        // -(x - 0.5)^2 - 0.01: negative everywhere; its plain Bernstein bound is
+        // not enough at degree 2 but halving proves it.
+        let c = [-0.26, 1.0, -1.0];
+        assert!(negative_on_unit(&c, 4));
+        // Touches zero inside: never claimed negative.
+        let c = from_roots(&[0.3, 0.3]).iter().map(|x| -x).collect::<Vec<_>>();
+        assert!(!negative_on_unit(&c, 6));
+        let c = from_roots(&[0.2, 0.7]);
+        assert!(!negative_on_unit(&c, 6));
     }
 
     #[test]

@@ -46,7 +46,7 @@
 use glam::{DVec3, Vec3};
 use smallvec::SmallVec;
 
-use crate::poly::{bernstein_max, cubic_range, roots_in_tol};
+use crate::poly::{cubic_range, negative_on_unit, roots_in_tol};
 
 /// An unmerged span `(t0, sub0, t1, sub1)`.
 type RawSpan = (f32, u32, f32, u32);
@@ -346,7 +346,10 @@ impl SweptSphereData {
                 dp[j + k] += r[j] * r[k] - cx[j] * cx[k] - cy[j] * cy[k] - cz[j] * cz[k];
             }
         }
-        if bernstein_max(&dp) < 0.0 {
+        // D < 0 on the whole segment: the ray misses this piece of tube. Halving
+        // the control polygon three times culls most near misses before any root
+        // finding (roots were ~60% of `scenes/sweep`'s trace time).
+        if negative_on_unit(&dp, 3) {
             return;
         }
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
