@@ -22,6 +22,8 @@ fn scene_with(shape: &str) -> String {
 
 fn expect_error(json: &str, must_contain: &[&str]) {
     let dir = tmpdir("bad");
+    // A mesh that encloses no volume (one flat triangle), next to the scene.
+    std::fs::write(dir.join("flat.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
     let f = dir.join(format!("s{}.json", json.len() ^ (json.as_bytes().iter().map(|&b| b as usize).sum::<usize>() << 8)));
     std::fs::write(&f, json).unwrap();
     let out = rothray().args(["render"]).arg(&f).args(["-o"]).arg(dir.join("x.png")).output().unwrap();
@@ -53,6 +55,14 @@ fn contract_errors_are_located_with_exit_2() {
         (r#"{"transformed":{"scale":[1,0,1],"shape":{"sphere":{"center":[0,0,0],"radius":1}}}}"#, &["objects[0].shape.union[1].transformed.scale"]),
         (r#"{"union":[]}"#, &["objects[0].shape.union[1].union"]),
         (r#"{"sphere":{"center":[0,0,0],"radius":1},"name":"a"}"#, &["objects[0].shape.union[1].name", "twice"]),
+        (r#"{"swept_sphere":{"bezier":[[0,0,0,1],[1,0,0,1],[2,0,0,1],[3,0,0,1],[4,0,0,1]]}}"#, &["objects[0].shape.union[1].swept_sphere.bezier", "3n+1"]),
+        (r#"{"swept_sphere":{"bezier":[[0,0,0,-1],[1,0,0,1],[2,0,0,1],[3,0,0,1]]}}"#, &["objects[0].shape.union[1].swept_sphere.bezier", "negative"]),
+        (r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0],[3,0,0]],"profile":{"polygon":[[0,0],[1,1],[1,0],[0,1]]}}}"#, &["objects[0].shape.union[1].generalized_cylinder.profile", "self-intersecting"]),
+        (r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0]],"profile":{"circle":0.2}}}"#, &["objects[0].shape.union[1].generalized_cylinder.path"]),
+        (r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0],[3,0,0]],"profile":{"circle":0.2},"frame":"bogus"}}"#, &["objects[0].shape.union[1].generalized_cylinder.frame"]),
+        (r#"{"mesh":{"path":"no-such-mesh.obj"}}"#, &["objects[0].shape.union[1].mesh.path", "no-such-mesh.obj"]),
+        (r#"{"mesh":{"path":"flat.obj"}}"#, &["objects[0].shape.union[1].mesh.path", "no volume"]),
+        (r#"{"mesh":{"path":"flat.obj","inside":"sometimes"}}"#, &["objects[0].shape.union[1].mesh.inside"]),
     ];
     for (shape, want) in cases {
         expect_error(&scene_with(shape), want);

@@ -174,9 +174,8 @@ impl GeneralizedCylinder {
                 let v: Vec<DVec2> = p.iter().map(|q| DVec2::new(q[0] as f64, q[1] as f64)).collect();
                 let m = v.len();
                 let area: f64 = (0..m).map(|i| v[i].perp_dot(v[(i + 1) % m])).sum::<f64>() * 0.5;
-                if area == 0.0 {
-                    return Err(err("profile", "polygon has zero area"));
-                }
+                // Self-intersection first: a bow tie's signed area can cancel to 0,
+                // and "self-intersecting" is the message that explains it.
                 for i in 0..m {
                     for j in i + 1..m {
                         let adjacent = j == i + 1 || (i == 0 && j == m - 1);
@@ -193,6 +192,9 @@ impl GeneralizedCylinder {
                             return Err(err("profile", format!("polygon is self-intersecting (edges {i} and {j})")));
                         }
                     }
+                }
+                if area == 0.0 {
+                    return Err(err("profile", "polygon has zero area"));
                 }
             }
         }
