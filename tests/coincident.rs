@@ -51,7 +51,7 @@ pub fn dots(img: &[u8], w: usize, h: usize) -> Vec<(usize, usize)> {
 
 #[test]
 fn example_scenes_have_no_speckle() {
-    for name in ["logo", "sampler", "cheese", "forest"] {
+    for name in ["logo", "sampler", "cheese", "forest", "sweep", "bunny", "tube"] {
         let img = id_image(&format!("{}/scenes/{name}.json", env!("CARGO_MANIFEST_DIR")), 400, 225);
         let s = dots(&img, 400, 225);
         // Distant forest trees and cheese holes can be one pixel in size; shapes of the rest may not.
