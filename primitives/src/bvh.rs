@@ -43,6 +43,8 @@ pub struct FlatBvh {
     pub prims: Vec<u32>,
     /// The wide BVH (None for a single-leaf set).
     pub cw: Option<CwBvh>,
+    /// The input boxes (kept with a `CwBvh`, which has no point query).
+    pub boxes: Vec<Aabb>,
 }
 
 impl FlatBvh {
@@ -60,6 +62,7 @@ impl FlatBvh {
                 nodes: vec![BvhNode { min: b.min, first: 0, max: b.max, count: boxes.len() as u32 }],
                 prims: (0..boxes.len() as u32).collect(),
                 cw: None,
+                boxes: Vec::new(),
             };
         }
         let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
@@ -76,6 +79,7 @@ impl FlatBvh {
             nodes: vec![BvhNode { min: b.min.into(), first: 0, max: b.max.into(), count: 0 }],
             prims: cw.primitive_indices.clone(),
             cw: Some(cw),
+            boxes: boxes.to_vec(),
         }
     }
 
@@ -99,7 +103,7 @@ impl FlatBvh {
                 BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
             })
             .collect();
-        FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None }
+        FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None, boxes: Vec::new() }
     }
 
     /// Root box (empty for an empty BVH).
@@ -117,17 +121,29 @@ impl FlatBvh {
             return;
         }
         if let Some(cw) = &self.cw {
+            // obvhs' CwBvh ignores `ray.tmin` and culls every box the ray leaves
+            // before t = 1e-4 (its EPSILON). So it gets a unit-length ray started
+            // BACK_OFF behind ours: t' = t |d| + BACK_OFF. Boxes touching our
+            // segment then have t' >= BACK_OFF > EPSILON, whatever the scale of d
+            // (t is in units of d, which callers need not normalise).
+            const BACK_OFF: f32 = 1e-3;
             let d = inv_d.recip();
-            let ray = ORay::new(o.into(), d.into(), tmin, tmax);
+            let dl = d.length();
+            if !(dl > 0.0 && dl.is_finite()) {
+                return;
+            }
+            let dn = d / dl;
+            let to_w = |t: f32| if t.is_finite() { t * dl + BACK_OFF } else { t };
+            let ray = ORay::new((o - dn * BACK_OFF).into(), dn.into(), to_w(tmin), to_w(tmax));
             let mut hit = RayHit::none();
             let prims = &self.prims;
-            cw.ray_traverse(ray, &mut hit, |r, slot| {
-                let nt = f(prims[slot], r.tmin);
+            cw.ray_traverse(ray, &mut hit, |_, slot| {
+                let nt = f(prims[slot], tmin);
                 if nt < tmin {
-                    // Stop: a tmax below tmin culls every remaining node.
+                    // Stop: a tmax below every box's entry culls every remaining node.
                     return f32::NEG_INFINITY;
                 }
-                nt
+                to_w(nt)
             });
             return;
         }
@@ -177,11 +193,13 @@ impl FlatBvh {
             return;
         }
         if self.cw.is_some() {
-            let d = Vec3::new(1.0, 0.618034, 0.381966);
-            self.traverse(p, d.recip(), 0.0, 0.0, |prim, _| {
-                f(prim);
-                0.0
-            });
+            // CwBvh has no point query (and a zero-length ray finds nothing in it:
+            // it culls boxes left before t = 1e-4): test the boxes themselves.
+            for (i, b) in self.boxes.iter().enumerate() {
+                if b.contains(p) {
+                    f(i as u32);
+                }
+            }
             return;
         }
         let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
@@ -234,6 +252,52 @@ mod tests {
                 if b.ray_range(o, inv, 0.0, 30.0).is_some() {
                     assert!(got.contains(&(i as u32)), "missed box {i}");
                 }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod cw_regressions {
+    use super::*;
+
+    fn grid() -> (Vec<Aabb>, FlatBvh) {
+        let boxes: Vec<Aabb> = (0..64)
+            .map(|i| {
+                let c = Vec3::new((i % 4) as f32, ((i / 4) % 4) as f32, (i / 16) as f32);
+                Aabb::new(c, c + Vec3::splat(0.5))
+            })
+            .collect();
+        let bvh = FlatBvh::build(&boxes, 1);
+        assert!(bvh.cw.is_some());
+        (boxes, bvh)
+    }
+
+    #[test]
+    fn point_query_finds_every_box_holding_the_point() {
+        // Regression: the CwBvh point query walked a zero-length ray and found nothing.
+        let (boxes, bvh) = grid();
+        for (i, b) in boxes.iter().enumerate() {
+            let mut got = vec![];
+            bvh.point_query(b.center(), |k| got.push(k));
+            assert_eq!(got, vec![i as u32]);
+        }
+    }
+
+    #[test]
+    fn long_directions_and_origins_inside_boxes() {
+        // Regression: obvhs culls boxes left before t = 1e-4, which with |d| = 1e4
+        // is a whole unit of length.
+        let (boxes, bvh) = grid();
+        for (i, b) in boxes.iter().enumerate() {
+            for d in [Vec3::new(1e4, 3.0, 7.0), Vec3::new(-2e-3, 1e-3, 5e-4), Vec3::new(0.3, -1.0, 0.2)] {
+                let o = b.max - Vec3::splat(1e-3); // just inside, about to leave
+                let mut got = vec![];
+                bvh.traverse(o, d.recip(), 0.0, f32::INFINITY, |k, _| {
+                    got.push(k);
+                    f32::INFINITY
+                });
+                assert!(got.contains(&(i as u32)), "box {i} holding the origin missed with d {d}");
             }
         }
     }

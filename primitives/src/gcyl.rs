@@ -468,7 +468,7 @@ impl GenCylData {
         let size = bounds.diagonal_length() as f64;
         let nsamp = ((2.0 * tol.powf(-0.25)).ceil() as usize).clamp(8, 512);
         let frames = build_frames(&segs, nsamp, desc.frame, desc.normal);
-        let bvh = (nseg > BVH_MIN_SEGMENTS).then(|| FlatBvh::build_binary(&boxes, 1));
+        let bvh = (nseg > BVH_MIN_SEGMENTS).then(|| FlatBvh::build(&boxes, 1));
         Ok(GenCylData {
             segs,
             boxes,

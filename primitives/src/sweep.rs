@@ -269,7 +269,7 @@ impl SweptSphereData {
         }
         let bvh = if live.len() > BVH_MIN_SEGMENTS {
             let lb: Vec<Aabb> = live.iter().map(|&i| boxes[i as usize]).collect();
-            Some(FlatBvh::build_binary(&lb, 1))
+            Some(FlatBvh::build(&lb, 1))
         } else {
             None
         };
