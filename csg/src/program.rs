@@ -393,16 +393,9 @@ impl Program {
         acc.clear();
         for k in 0..count {
             let c = self.children[first + k] as usize;
-            if self.bounds[c].ray_range(ray.o, ray.inv_d, lo, hi).is_none() {
-                match kind {
-                    NodeKind::Intersection => {
-                        acc.clear();
-                        return valid;
-                    }
-                    NodeKind::Difference if k == 0 => return valid,
-                    _ => continue,
-                }
-            }
+            // No box test first: for a leaf the kernel is about as cheap, and a miss
+            // gives no span, which has the same effect (measured with callgrind on
+            // scenes/logo: the box tests were ~8% of the instructions).
             if k == 0 || (kind == NodeKind::Union && acc.is_empty()) {
                 leaves.spans(self.first[c], ray.o, ray.d, lo, hi, acc);
             } else {

@@ -215,8 +215,15 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     const ROWS: usize = 4;
     let shadow_total = AtomicUsize::new(0);
     let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
-    // Tiles whose pyramid of rays misses the scene's bounds are background: no ray is traced.
+    // Tiles whose pyramid of rays misses every object's bounds are background: no
+    // ray is traced. Objects are tested one by one when there are few of them
+    // (scenes/sampler: three objects spread over the picture), else the scene box.
     let cull = scene.all_bounded() && !scene.bounds.is_empty();
+    let cull_boxes: Vec<rothray_primitives::Aabb> = if scene.objects.len() <= 32 {
+        scene.objects.iter().map(|o| o.bounds).filter(|b| !b.is_empty()).collect()
+    } else {
+        vec![scene.bounds]
+    };
     lin.par_chunks_mut(w * ROWS).zip(depth.par_chunks_mut(w * ROWS)).enumerate().for_each_init(
         Scratch::default,
         |scratch, (chunk, (lrows, drows))| {
@@ -225,7 +232,11 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
             let rows_here = lrows.len() / w;
             for x0 in (0..w).step_by(TILE_W) {
                 let x1 = (x0 + TILE_W).min(w);
-                if cull && !frustum_touches(&rays, x0 as f32, y0 as f32, x1 as f32, (y0 + rows_here) as f32, &scene.bounds) {
+                if cull
+                    && !cull_boxes
+                        .iter()
+                        .any(|b| frustum_touches(&rays, x0 as f32, y0 as f32, x1 as f32, (y0 + rows_here) as f32, b))
+                {
                     for r in 0..rows_here {
                         lrows[r * w + x0..r * w + x1].fill(bg);
                         drows[r * w + x0..r * w + x1].fill(f32::INFINITY);
