@@ -271,30 +271,30 @@ impl Program {
                     let f = &scratch.frames[top];
                     let (ct0, ct1) = (f.tmin, f.tmax);
                     if self.kind[c as usize] == NodeKind::Leaf {
-                        let mut leaf = std::mem::take(&mut scratch.leaf);
+                        let Scratch { frames, accs, tmp, leaf, .. } = scratch;
                         leaf.clear();
-                        leaves.spans(self.first[c as usize], ray.o, ray.d, ct0, ct1, &mut leaf);
+                        leaves.spans(self.first[c as usize], ray.o, ray.d, ct0, ct1, leaf);
                         // A leaf's spans are exact on the range it was asked for.
-                        self.absorb(top, &leaf, f32::INFINITY, ray, mode, scratch);
-                        scratch.leaf = leaf;
+                        self.absorb(&mut frames[top], &mut accs[top], tmp, leaf.as_slice(), f32::INFINITY, ray, mode);
                     } else if self.leafy[c as usize] {
                         // Bottom-level inner node: evaluate in place, no frame.
                         let cu = c as usize;
-                        let mut sub = std::mem::take(&mut scratch.sub);
-                        sub.clear();
-                        let valid = if self.bounds[cu].ray_range(ray.o, ray.inv_d, ct0, ct1).is_none() {
-                            f32::INFINITY
-                        } else if self.wide[cu] == u32::MAX {
-                            self.leaf_node(cu, ray, ct0, ct1, mode, leaves, scratch, &mut sub)
-                        } else if self.kind[cu] == NodeKind::Union {
-                            self.leaf_union(cu, ray, ct0, ct1, mode, leaves, scratch, &mut sub)
-                        } else {
-                            scratch.sub = sub;
+                        let miss = self.bounds[cu].ray_range(ray.o, ray.inv_d, ct0, ct1).is_none();
+                        let narrow = self.wide[cu] == u32::MAX;
+                        if !miss && !narrow && self.kind[cu] != NodeKind::Union {
                             self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
                             continue;
+                        }
+                        let Scratch { frames, accs, tmp, leaf, sub, .. } = scratch;
+                        sub.clear();
+                        let valid = if miss {
+                            f32::INFINITY
+                        } else if narrow {
+                            self.leaf_node(cu, ray, ct0, ct1, mode, leaves, leaf, tmp, sub)
+                        } else {
+                            self.leaf_union(cu, ray, ct0, ct1, mode, leaves, leaf, tmp, sub)
                         };
-                        self.absorb(top, &sub, valid, ray, mode, scratch);
-                        scratch.sub = sub;
+                        self.absorb(&mut frames[top], &mut accs[top], tmp, sub.as_slice(), valid, ray, mode);
                     } else {
                         self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
                     }
@@ -307,10 +307,17 @@ impl Program {
                         std::mem::swap(&mut scratch.out, &mut scratch.accs[depth]);
                         return f.valid.min(tmax);
                     }
-                    let mut child = std::mem::take(&mut scratch.accs[depth]);
-                    self.absorb(depth - 1, &child, f.valid, ray, mode, scratch);
-                    child.clear();
-                    scratch.accs[depth] = child;
+                    let (parents, rest) = scratch.accs.split_at_mut(depth);
+                    self.absorb(
+                        &mut scratch.frames[depth - 1],
+                        &mut parents[depth - 1],
+                        &mut scratch.tmp,
+                        rest[0].as_slice(),
+                        f.valid,
+                        ray,
+                        mode,
+                    );
+                    rest[0].clear();
                 }
             }
         }
@@ -350,15 +357,13 @@ impl Program {
             && self.wide[n] != u32::MAX
             && self.wides[self.wide[n] as usize].all_leaves
         {
-            let mut acc = std::mem::take(&mut scratch.accs[depth]);
-            let valid = self.leaf_union(n, ray, tmin, tmax, mode, leaves, scratch, &mut acc);
-            scratch.accs[depth] = acc;
+            let Scratch { accs, leaf, tmp, .. } = scratch;
+            let valid = self.leaf_union(n, ray, tmin, tmax, mode, leaves, leaf, tmp, &mut accs[depth]);
             frame.valid = valid;
             frame.done = true;
         } else if self.leafy[n] && self.wide[n] == u32::MAX {
-            let mut acc = std::mem::take(&mut scratch.accs[depth]);
-            frame.valid = self.leaf_node(n, ray, tmin, tmax, mode, leaves, scratch, &mut acc);
-            scratch.accs[depth] = acc;
+            let Scratch { accs, leaf, tmp, .. } = scratch;
+            frame.valid = self.leaf_node(n, ray, tmin, tmax, mode, leaves, leaf, tmp, &mut accs[depth]);
             frame.done = true;
         } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX {
             let lo = scratch.cand.len();
@@ -381,7 +386,8 @@ impl Program {
         tmax: f32,
         mode: Mode,
         leaves: &LeafTable,
-        scratch: &mut Scratch,
+        leaf: &mut SpanList,
+        tmp: &mut SpanList,
         acc: &mut SpanList,
     ) -> f32 {
         let kind = self.kind[n];
@@ -389,7 +395,6 @@ impl Program {
         let (first, count) = (self.first[n] as usize, self.count[n] as usize);
         let (mut lo, mut hi) = (tmin, tmax);
         let mut valid = f32::INFINITY;
-        let Scratch { leaf, tmp, .. } = scratch;
         acc.clear();
         for k in 0..count {
             let c = self.children[first + k] as usize;
@@ -439,7 +444,8 @@ impl Program {
         tmax: f32,
         mode: Mode,
         leaves: &LeafTable,
-        scratch: &mut Scratch,
+        leaf: &mut SpanList,
+        tmp: &mut SpanList,
         acc: &mut SpanList,
     ) -> f32 {
         let w = &self.wides[self.wide[n] as usize];
@@ -447,7 +453,6 @@ impl Program {
         // `hi`: the working range's end; `valid`: where the result stops being exact.
         let mut hi = tmax;
         let mut valid = f32::INFINITY;
-        let Scratch { leaf, tmp, .. } = scratch;
         let mut visit = |pos: u32, acc: &mut SpanList, hi: &mut f32, valid: &mut f32| {
             let c = self.children[(first + pos) as usize];
             leaf.clear();
@@ -568,10 +573,17 @@ impl Program {
     }
 
     /// Folds a child's result into frame `top`.
-    fn absorb(&self, top: usize, r: &SpanList, r_valid: f32, ray: &RayCtx, mode: Mode, scratch: &mut Scratch) {
-        let Scratch { frames, accs, tmp, .. } = scratch;
-        let f = &mut frames[top];
-        let acc = &mut accs[top];
+    #[allow(clippy::too_many_arguments)]
+    fn absorb(
+        &self,
+        f: &mut Frame,
+        acc: &mut SpanList,
+        tmp: &mut SpanList,
+        r: &[Span],
+        r_valid: f32,
+        ray: &RayCtx,
+        mode: Mode,
+    ) {
         let kind = self.kind[f.node as usize];
         if r_valid < f.valid {
             f.valid = r_valid;
@@ -581,10 +593,10 @@ impl Program {
         let first = acc.is_empty() && is_first(f, kind, self.wide[f.node as usize] != u32::MAX);
         if first {
             acc.clear();
-            acc.0.extend_from_slice(r.as_slice());
+            acc.0.extend_from_slice(r);
             acc.truncate_at(f.tmax);
         } else {
-            combine_into(kind.op(), acc, r.as_slice(), ray.eps, tmp);
+            combine_into(kind.op(), acc, r, ray.eps, tmp);
         }
         match kind {
             NodeKind::Union => {
