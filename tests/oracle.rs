@@ -216,21 +216,6 @@ pub fn random_ray(rng: &mut SmallRng) -> (DVec3, DVec3) {
     (o, d * rng.gen_range(0.3..2.0))
 }
 
-/// The f64 crossing nearest `t` of the predicate along the ray, by bisection in
-/// `[t - w, t + w]` (None when the predicate does not change there).
-pub fn true_crossing(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, t: f64, w: f64) -> Option<f64> {
-    let (mut a, mut b) = (t - w, t + w);
-    let fa = f(o + d * a);
-    if fa == f(o + d * b) {
-        return None;
-    }
-    for _ in 0..60 {
-        let m = 0.5 * (a + b);
-        if f(o + d * m) == fa { a = m } else { b = m }
-    }
-    Some(0.5 * (a + b))
-}
-
 /// Statistics of a span check.
 #[derive(Default, Debug)]
 pub struct Check {
