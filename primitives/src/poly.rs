@@ -133,16 +133,27 @@ pub fn bernstein_min(a: &[f64]) -> f64 {
     bernstein_coeffs(a).fold(f64::INFINITY, f64::min)
 }
 
+/// Binomial coefficients C(n, k) for n, k <= MAX_DEGREE (Pascal's triangle).
+const BINOM: [[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
+    let mut t = [[0.0f64; MAX_DEGREE + 1]; MAX_DEGREE + 1];
+    let mut n = 0;
+    while n <= MAX_DEGREE {
+        t[n][0] = 1.0;
+        let mut k = 1;
+        while k <= n {
+            t[n][k] = t[n - 1][k - 1] + if k < n { t[n - 1][k] } else { 0.0 };
+            k += 1;
+        }
+        n += 1;
+    }
+    t
+};
+
+/// Bernstein coefficients on [0, 1] of a polynomial in monomial form:
+/// `b_k = sum_{i <= k} C(k, i) / C(n, i) a_i`.
 fn bernstein_coeffs(a: &[f64]) -> impl Iterator<Item = f64> + '_ {
     let n = a.len() - 1;
-    let binom = |n: usize, k: usize| -> f64 {
-        let mut r = 1.0;
-        for i in 0..k {
-            r = r * (n - i) as f64 / (i + 1) as f64;
-        }
-        r
-    };
-    (0..=n).map(move |k| (0..=k).map(|i| binom(k, i) / binom(n, i) * a[i]).sum())
+    (0..=n).map(move |k| (0..=k).map(|i| BINOM[k][i] / BINOM[n][i] * a[i]).sum())
 }
 
 /// Is the polynomial negative on all of [0, 1]? Bernstein coefficients all
@@ -250,6 +261,18 @@ mod tests {
         assert!(!negative_on_unit(&c, 6));
         let c = from_roots(&[0.2, 0.7]);
         assert!(!negative_on_unit(&c, 6));
+    }
+
+    #[test]
+    fn bernstein_bounds_enclose_the_polynomial() {
+        // (x - 0.3)(x - 0.6)(x + 1): the coefficients bound every sampled value.
+        let c = from_roots(&[0.3, 0.6, -1.0]);
+        let (lo, hi) = (bernstein_min(&c), bernstein_max(&c));
+        for k in 0..=100 {
+            let v = eval(&c, k as f64 / 100.0);
+            assert!(v >= lo - 1e-12 && v <= hi + 1e-12);
+        }
+        assert_eq!(BINOM[6][3], 20.0);
     }
 
     #[test]
