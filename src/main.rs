@@ -148,6 +148,11 @@ fn settings(sf: &SceneFile, width: Option<u32>, height: Option<u32>, spp: u32, a
     if w == 0 || h == 0 || w > 65536 || h > 65536 {
         return Err(BadInput(format!("image size {w}x{h} is out of range (1..65536)")).into());
     }
+    // About 19 bytes per pixel are held while rendering: cap the frame at 2^28
+    // pixels (~5 GB) rather than fail in the allocator.
+    if (w as u64) * (h as u64) > 1 << 28 {
+        return Err(BadInput(format!("image size {w}x{h} has more than 2^28 pixels")).into());
+    }
     if spp == 0 || spp > 65536 {
         return Err(BadInput(format!("--spp {spp} is out of range (1..65536)")).into());
     }

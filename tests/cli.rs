@@ -73,4 +73,7 @@ fn render_every_aov() {
     }
     let out = rothray().arg("render").arg(sampler()).args(["-o", "/tmp/x.png", "--aov", "bogus"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
+    // A frame too large to hold is refused up front, not in the allocator.
+    let out = rothray().arg("render").arg(sampler()).args(["-o", "/tmp/x.png", "--width", "65536", "--height", "65536"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
 }
