@@ -174,17 +174,23 @@ pub fn load_scene(path: &Path) -> Result<SceneFile, SceneError> {
 
 /// Parses scene text; `path` names the file in errors and anchors relative mesh paths.
 pub fn parse_scene(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
-    let text = text.to_string();
-    let path = path.to_path_buf();
-    std::thread::Builder::new()
-        .name("scene-parse".into())
-        .stack_size(1 << 30)
-        .spawn(move || parse_scene_inner(&text, &path))
-        .expect("spawn parser thread")
-        .join()
-        .unwrap_or_else(|_| {
-            Err(SceneError::Invalid { file: String::new(), at: String::new(), message: "parser crashed".into() })
-        })
+    // Deep nesting recurses: parse on a thread with a large stack (address space
+    // only; pages are touched as used). If the system refuses that much, try less.
+    for stack in [1usize << 30, 1 << 26] {
+        let (t, p) = (text.to_string(), path.to_path_buf());
+        let spawned =
+            std::thread::Builder::new().name("scene-parse".into()).stack_size(stack).spawn(move || parse_scene_inner(&t, &p));
+        if let Ok(h) = spawned {
+            return h.join().unwrap_or_else(|_| {
+                Err(SceneError::Invalid {
+                    file: path.display().to_string(),
+                    at: String::new(),
+                    message: "the parser crashed (please report this scene)".into(),
+                })
+            });
+        }
+    }
+    parse_scene_inner(text, path)
 }
 
 fn parse_scene_inner(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
