@@ -109,7 +109,10 @@ pub fn roots_in_tol(c: &[f64], lo: f64, hi: f64, eps: f64, out: &mut [f64; MAX_D
         d[i - 1] = c[i] * i as f64;
     }
     let mut crit = [0.0f64; MAX_DEGREE];
-    let nc = roots_in_tol(&d[..n - 1], lo, hi, eps, &mut crit);
+    // The derivative's roots only bracket monotonic pieces; near them the
+    // polynomial is flat, so a bracket off by d moves its value by O(d^2):
+    // 1e-9 of the interval is plenty (the roots themselves stay at `eps`).
+    let nc = roots_in_tol(&d[..n - 1], lo, hi, eps.max(1e-9 * (hi - lo)), &mut crit);
     let mut count = 0;
     let mut a = lo;
     let mut fa = eval(c, a);
