@@ -687,20 +687,14 @@ impl Program {
     }
 }
 
+/// Is the operand just taken the first one of the frame (it initialises the
+/// accumulator of an intersection or difference; for a union an empty
+/// accumulator is the identity anyway)?
 #[inline(always)]
-fn is_first(f: &Frame, kind: NodeKind, wide: bool) -> bool {
-    // The first operand of an intersection/difference initialises the accumulator;
-    // for a union an empty accumulator is the identity anyway.
+fn is_first(f: &Frame, kind: NodeKind, _wide: bool) -> bool {
     match kind {
-        NodeKind::Union => true,
-        NodeKind::Intersection | NodeKind::Difference => {
-            if wide && kind == NodeKind::Difference {
-                f.next == 1
-            } else {
-                f.next == 1
-            }
-        }
-        NodeKind::Leaf => true,
+        NodeKind::Intersection | NodeKind::Difference => f.next == 1,
+        NodeKind::Union | NodeKind::Leaf => true,
     }
 }
 

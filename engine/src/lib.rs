@@ -19,8 +19,8 @@
 //! let mut scene = RenderScene::default();
 //! sync_scene(&mut world, &mut scene).unwrap();
 //! let hit = scene.intersect(&Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z));
-//! // The ray goes down the hole the sphere cut through the box's face: it
-//! // sees nothing until the corner regions... and here exits through the back.
+//! // Along the z axis the sphere (radius 1.2) covers the whole box depth: the ray
+//! // passes through the hole and meets nothing.
 //! assert!(hit.is_none());
 //! assert!(scene.contains_entity(Vec3::new(0.95, 0.95, 0.95), cut));
 //! ```
