@@ -41,9 +41,6 @@ pub struct Wide {
     pub bvh: FlatBvh,
     /// Positions of children with unbounded boxes (always visited).
     pub unbounded: Vec<u32>,
-    /// Every child is a leaf: the union is evaluated in one BVH walk with a
-    /// shrinking range, without frames or candidate lists.
-    pub all_leaves: bool,
 }
 
 /// All CSG trees of a scene, SoA, children before parents.
@@ -218,8 +215,7 @@ impl<'a> ProgramBuilder<'a> {
                 *x = ids[*x as usize];
             }
             wide = p.wides.len() as u32;
-            let all_leaves = flat.iter().all(|&c| p.kind[c as usize] == NodeKind::Leaf);
-            p.wides.push(Wide { bvh, unbounded, all_leaves });
+            p.wides.push(Wide { bvh, unbounded });
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);
@@ -353,10 +349,8 @@ impl Program {
         let n = node as usize;
         if self.bounds[n].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
             frame.done = true;
-        } else if self.kind[n] == NodeKind::Union
-            && self.wide[n] != u32::MAX
-            && self.wides[self.wide[n] as usize].all_leaves
-        {
+        } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX && self.leafy[n] {
+            // Every operand a leaf: one BVH walk with a shrinking range, no frames.
             let Scratch { accs, leaf, tmp, .. } = scratch;
             let valid = self.leaf_union(n, ray, tmin, tmax, mode, leaves, leaf, tmp, &mut accs[depth]);
             frame.valid = valid;
@@ -411,12 +405,9 @@ impl Program {
             match kind {
                 NodeKind::Union => {
                     if mode == Mode::Nearest {
-                        if let Some(&s) = acc.as_slice().first() {
-                            if s.s0.is_real() && s.t0 < hi {
-                                hi = s.t0;
-                                valid = s.t0;
-                                acc.truncate_at(s.t0);
-                            }
+                        if let Some(t) = stop_at_first_entry(acc, hi) {
+                            hi = t;
+                            valid = t;
                         }
                     }
                 }
@@ -466,11 +457,9 @@ impl Program {
                 combine_into(Op::Union, acc, leaf.as_slice(), ray.eps, tmp);
             }
             if mode == Mode::Nearest {
-                let s = acc.as_slice()[0];
-                if s.s0.is_real() && s.t0 < *hi {
-                    *hi = s.t0;
-                    *valid = s.t0;
-                    acc.truncate_at(s.t0);
+                if let Some(t) = stop_at_first_entry(acc, *hi) {
+                    *hi = t;
+                    *valid = t;
                 }
             }
         };
@@ -590,7 +579,7 @@ impl Program {
             f.tmax = f.tmax.min(r_valid);
             acc.truncate_at(r_valid);
         }
-        let first = acc.is_empty() && is_first(f, kind, self.wide[f.node as usize] != u32::MAX);
+        let first = acc.is_empty() && is_first(f, kind);
         if first {
             acc.clear();
             acc.0.extend_from_slice(r);
@@ -601,12 +590,9 @@ impl Program {
         match kind {
             NodeKind::Union => {
                 if mode == Mode::Nearest {
-                    if let Some(s) = acc.as_slice().first() {
-                        if s.s0.is_real() && s.t0 < f.tmax {
-                            f.valid = s.t0;
-                            f.tmax = f.tmax.min(s.t0);
-                            acc.truncate_at(s.t0);
-                        }
+                    if let Some(t) = stop_at_first_entry(acc, f.tmax) {
+                        f.valid = t;
+                        f.tmax = t;
                     }
                 }
             }
@@ -671,19 +657,19 @@ impl Program {
         lo
     }
 
-    /// The leaves of node `root` (iterative walk).
-    pub fn leaves_of(&self, root: u32) -> Vec<u32> {
-        let mut out = Vec::new();
-        let mut stack = vec![root];
-        while let Some(n) = stack.pop() {
-            if self.kind[n as usize] == NodeKind::Leaf {
-                out.push(self.first[n as usize]);
-            } else {
-                let (f, c) = (self.first[n as usize] as usize, self.count[n as usize] as usize);
-                stack.extend_from_slice(&self.children[f..f + c]);
-            }
-        }
-        out
+}
+
+/// Nearest mode: a union is needed only up to its first confirmed entry (the
+/// query's answer is there or before). Truncates `acc` there and returns it
+/// when that is before `hi`.
+#[inline(always)]
+fn stop_at_first_entry(acc: &mut SpanList, hi: f32) -> Option<f32> {
+    let s = *acc.as_slice().first()?;
+    if s.s0.is_real() && s.t0 < hi {
+        acc.truncate_at(s.t0);
+        Some(s.t0)
+    } else {
+        None
     }
 }
 
@@ -691,7 +677,7 @@ impl Program {
 /// accumulator of an intersection or difference; for a union an empty
 /// accumulator is the identity anyway)?
 #[inline(always)]
-fn is_first(f: &Frame, kind: NodeKind, _wide: bool) -> bool {
+fn is_first(f: &Frame, kind: NodeKind) -> bool {
     match kind {
         NodeKind::Intersection | NodeKind::Difference => f.next == 1,
         NodeKind::Union | NodeKind::Leaf => true,
