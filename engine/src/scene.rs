@@ -153,6 +153,9 @@ pub struct RenderScene {
     pub bounds: Aabb,
     /// Length tolerance of the scene (fusing coincident crossings).
     pub eps: f32,
+    /// Centre of `bounds` (origin when empty): the tolerance grows with a ray's
+    /// distance from it.
+    center: Vec3,
     /// How many times [`sync_scene`] rebuilt the tables.
     pub bake_count: u64,
     /// Accuracy knob of the swept-sphere and generalized-cylinder solvers, relative
@@ -442,6 +445,7 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     scene.unbounded = unbounded;
     scene.bounds = bounds;
     scene.eps = 1e-5 * diag;
+    scene.center = if bounds.is_empty() { Vec3::ZERO } else { bounds.center() };
     scene.bake_count += 1;
     Ok(())
 }
@@ -468,8 +472,7 @@ impl RenderScene {
     /// scene, since f32 rounding of the crossings does.
     #[inline]
     pub fn ray_ctx(&self, o: Vec3, d: Vec3) -> RayCtx {
-        let c = if self.bounds.is_empty() { Vec3::ZERO } else { self.bounds.center() };
-        let far = (o - c).length();
+        let far = (o - self.center).length();
         RayCtx::new(o, d, self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 })
     }
 
