@@ -303,7 +303,7 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
             Some(v) => Some(cx.color(v, &format!("{at}.color"))?),
             None => None,
         };
-        let e = parse_shape(cx, &om["shape"], &format!("{at}.shape"), color)?;
+        let e = parse_shape(cx, &om["shape"], &format!("{at}.shape"))?;
         // The object is its shape's root entity; give it the object's name and order.
         let leaf_name = cx.world.get::<&Name>(e).ok().map(|n| n.0.clone());
         let root = if leaf_name.is_some() && cx.world.get::<&CsgNode>(e).is_err() {
@@ -333,7 +333,7 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
     })
 }
 
-fn parse_shape(cx: &mut Ctx, v: &Value, at: &str, _inherited: Option<Vec3>) -> R<Entity> {
+fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
     let m = cx.obj(v, at)?;
     let kinds: Vec<&String> = m.keys().filter(|k| k.as_str() != "name" && k.as_str() != "color").collect();
     if kinds.is_empty() {
@@ -363,7 +363,7 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str, _inherited: Option<Vec3>) -> R
             }
             let mut children = Vec::with_capacity(arr.len());
             for (i, c) in arr.iter().enumerate() {
-                children.push(parse_shape(cx, c, &format!("{kat}[{i}]"), None)?);
+                children.push(parse_shape(cx, c, &format!("{kat}[{i}]"))?);
             }
             let op = match kind.as_str() {
                 "union" => Op::Union,
@@ -419,27 +419,22 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str, _inherited: Option<Vec3>) -> R
                 }
                 Transform::from_trs_deg(tr, rot, sc)
             };
-            let child = parse_shape(cx, &tm["shape"], &join(&kat, "shape"), None)?;
+            let child = parse_shape(cx, &tm["shape"], &join(&kat, "shape"))?;
             // A transformed node is a one-child union carrying the transform.
             cx.world.spawn((CsgNode::union([child]), t))
         }
+        // Leaves are named by their JSON path unless they have a `name` (set below).
         "swept_sphere" => {
             let desc = parse_sweep(cx, body, &kat)?;
-            let e = cx.world.spawn((desc,));
-            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
-            e
+            cx.world.spawn((desc, Name::new(kat.clone())))
         }
         "generalized_cylinder" => {
             let desc = parse_gcyl(cx, body, &kat)?;
-            let e = cx.world.spawn((desc,));
-            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
-            e
+            cx.world.spawn((desc, Name::new(kat.clone())))
         }
         "mesh" => {
             let m = parse_mesh(cx, body, &kat)?;
-            let e = cx.world.spawn((MeshSolid(m),));
-            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
-            e
+            cx.world.spawn((MeshSolid(m), Name::new(kat.clone())))
         }
         _ if LEAF_KINDS.contains(&kind.as_str()) => {
             let shape = parse_leaf(cx, &kind, body, &kat)?;
@@ -447,16 +442,15 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str, _inherited: Option<Vec3>) -> R
                 let at = join(&kat, e.field);
                 return cx.err(&at, e.message);
             }
-            let e = match shape {
-                LeafShape::Sphere(s) => cx.world.spawn((s,)),
-                LeafShape::Cuboid(s) => cx.world.spawn((s,)),
-                LeafShape::Cylinder(s) => cx.world.spawn((s,)),
-                LeafShape::Cone(s) => cx.world.spawn((s,)),
-                LeafShape::Torus(s) => cx.world.spawn((s,)),
-                LeafShape::HalfSpace(s) => cx.world.spawn((s,)),
-            };
-            let _ = cx.world.insert_one(e, Name::new(name.clone().unwrap_or_else(|| kat.clone())));
-            e
+            let path = Name::new(kat.clone());
+            match shape {
+                LeafShape::Sphere(s) => cx.world.spawn((s, path)),
+                LeafShape::Cuboid(s) => cx.world.spawn((s, path)),
+                LeafShape::Cylinder(s) => cx.world.spawn((s, path)),
+                LeafShape::Cone(s) => cx.world.spawn((s, path)),
+                LeafShape::Torus(s) => cx.world.spawn((s, path)),
+                LeafShape::HalfSpace(s) => cx.world.spawn((s, path)),
+            }
         }
         other => {
             return cx.err(
