@@ -27,6 +27,20 @@ enum AovArg {
     Id,
 }
 
+/// Image size and sampling, shared by `render` and `bench`.
+#[derive(clap::Args, Clone, Copy)]
+struct ImageArgs {
+    /// Image width (default: the scene's).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Image height (default: the scene's).
+    #[arg(long)]
+    height: Option<u32>,
+    /// Samples per pixel (jittered when > 1).
+    #[arg(long, default_value_t = 1)]
+    spp: u32,
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Render a scene to a PNG.
@@ -36,15 +50,8 @@ enum Cmd {
         /// Output PNG.
         #[arg(short = 'o', long = "output")]
         output: PathBuf,
-        /// Image width (default: the scene's).
-        #[arg(long)]
-        width: Option<u32>,
-        /// Image height (default: the scene's).
-        #[arg(long)]
-        height: Option<u32>,
-        /// Samples per pixel (jittered when > 1).
-        #[arg(long, default_value_t = 1)]
-        spp: u32,
+        #[command(flatten)]
+        image: ImageArgs,
         /// What to draw.
         #[arg(long, value_enum, default_value = "shaded")]
         aov: AovArg,
@@ -67,15 +74,8 @@ enum Cmd {
     Bench {
         /// Scene file (JSON).
         scene: PathBuf,
-        /// Image width (default: the scene's).
-        #[arg(long)]
-        width: Option<u32>,
-        /// Image height (default: the scene's).
-        #[arg(long)]
-        height: Option<u32>,
-        /// Samples per pixel.
-        #[arg(long, default_value_t = 1)]
-        spp: u32,
+        #[command(flatten)]
+        image: ImageArgs,
         /// Number of timed renders (the median is reported).
         #[arg(long, default_value_t = 7)]
         repeats: u32,
@@ -142,9 +142,8 @@ fn load(path: &Path) -> Result<(SceneFile, RenderScene, Duration)> {
     Ok((sf, scene, t.elapsed()))
 }
 
-fn settings(sf: &SceneFile, width: Option<u32>, height: Option<u32>, spp: u32, aov: Aov) -> Result<RenderSettings> {
-    let w = width.unwrap_or(sf.width);
-    let h = height.unwrap_or(sf.height);
+fn settings(sf: &SceneFile, img: ImageArgs, aov: Aov) -> Result<RenderSettings> {
+    let (w, h, spp) = (img.width.unwrap_or(sf.width), img.height.unwrap_or(sf.height), img.spp);
     if w == 0 || h == 0 || w > 65536 || h > 65536 {
         return Err(BadInput(format!("image size {w}x{h} is out of range (1..65536)")).into());
     }
@@ -214,7 +213,7 @@ impl Progress {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
-        Cmd::Render { scene, output, width, height, spp, aov } => {
+        Cmd::Render { scene, output, image, aov } => {
             let (sf, rs, _) = load(&scene)?;
             let aov = match aov {
                 AovArg::Shaded => Aov::Shaded,
@@ -222,7 +221,7 @@ fn run(cli: Cli) -> Result<()> {
                 AovArg::Normal => Aov::Normal,
                 AovArg::Id => Aov::Id,
             };
-            let s = settings(&sf, width, height, spp, aov)?;
+            let s = settings(&sf, image, aov)?;
             let prog = Progress::start(s.height as usize, "render");
             let done = prog.done.clone();
             let (img, _) = render(&rs, &sf.camera, &s, &|d, _| {
@@ -288,12 +287,12 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Cmd::Check { mesh, json } => check_mesh(&mesh, json),
-        Cmd::Bench { scene, width, height, repeats, json, tolerances, plot, .. } if !tolerances.is_empty() => {
-            bench_tolerances(&scene, width, height, repeats, &tolerances, plot.as_deref(), json)
+        Cmd::Bench { scene, image, repeats, json, tolerances, plot, .. } if !tolerances.is_empty() => {
+            bench_tolerances(&scene, image, repeats, &tolerances, plot.as_deref(), json)
         }
-        Cmd::Bench { scene, width, height, spp, repeats, json, no_shadows, .. } => {
+        Cmd::Bench { scene, image, repeats, json, no_shadows, .. } => {
             let (sf, rs, bake) = load(&scene)?;
-            let mut s = settings(&sf, width, height, spp, Aov::Shaded)?;
+            let mut s = settings(&sf, image, Aov::Shaded)?;
             if no_shadows {
                 s.lights.clear();
                 s.ambient = 1.0;
@@ -409,8 +408,7 @@ fn check_mesh(path: &Path, json: bool) -> Result<()> {
 /// `bench --tolerances`: run time against error for the solver tolerance.
 fn bench_tolerances(
     scene: &Path,
-    width: Option<u32>,
-    height: Option<u32>,
+    image: ImageArgs,
     repeats: u32,
     tols: &[f32],
     plot: Option<&Path>,
@@ -418,7 +416,8 @@ fn bench_tolerances(
 ) -> Result<()> {
     use rothray_engine::{bake_scene, Ray};
     let sf = load_scene(scene).map_err(|e| BadInput(e.to_string()))?;
-    let s = settings(&sf, width, height, 1, Aov::Depth)?;
+    // One sample per pixel: the error is measured per camera ray.
+    let s = settings(&sf, ImageArgs { spp: 1, ..image }, Aov::Depth)?;
     for &t in tols {
         if !(t.is_finite() && t > 0.0) {
             return Err(BadInput(format!("--tolerances: {t} is not a positive number")).into());
