@@ -204,21 +204,3 @@ pub fn combine_into(op: Op, acc: &mut SpanList, b: &[Span], eps: f32, tmp: &mut 
     acc.0.clear();
     acc.0.extend_from_slice(tmp.as_slice());
 }
-
-/// Regularises one list on its own: drops spans shorter than `eps`, merges spans
-/// closer than `eps`.
-pub fn regularise(l: &mut SpanList, eps: f32) {
-    let mut out: SmallVec<[Span; INLINE_SPANS]> = SmallVec::new();
-    for s in l.0.iter() {
-        if let Some(last) = out.last_mut() {
-            if s.t0 - last.t1 <= eps {
-                last.t1 = s.t1;
-                last.s1 = s.s1;
-                continue;
-            }
-        }
-        out.push(*s);
-    }
-    out.retain(|s| s.t1 - s.t0 > eps);
-    l.0 = out;
-}
