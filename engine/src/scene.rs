@@ -248,9 +248,20 @@ pub fn find_objects(world: &World) -> Vec<Entity> {
     roots.into_iter().map(|(_, e)| e).collect()
 }
 
+/// Feeds formatted text into a hasher.
+struct HashWriter<'a, H: std::hash::Hasher>(&'a mut H);
+
+impl<H: std::hash::Hasher> std::fmt::Write for HashWriter<'_, H> {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        self.0.write(s.as_bytes());
+        Ok(())
+    }
+}
+
 /// A cheap fingerprint of everything the bake reads, so [`sync_scene`] can skip
 /// work when nothing changed.
 pub fn fingerprint_world(world: &World) -> u64 {
+    use std::fmt::Write;
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
     for er in world.iter() {
@@ -259,13 +270,18 @@ pub fn fingerprint_world(world: &World) -> u64 {
             continue;
         }
         e.hash(&mut h);
-        match leaf_desc(world, e) {
-            Some(LeafDesc::Mesh(m)) => (Arc::as_ptr(&m) as usize).hash(&mut h),
-            Some(LeafDesc::Analytic(s)) => format!("{s:?}").hash(&mut h),
-            Some(LeafDesc::Swept(s)) => format!("{s:?}").hash(&mut h),
-            Some(LeafDesc::GenCyl(s)) => format!("{s:?}").hash(&mut h),
-            None => {}
-        }
+        // The descriptions' Debug text goes straight into the hasher (no String per
+        // entity: tools call `sync_scene` every frame).
+        let _ = match leaf_desc(world, e) {
+            Some(LeafDesc::Mesh(m)) => {
+                (Arc::as_ptr(&m) as usize).hash(&mut h);
+                Ok(())
+            }
+            Some(LeafDesc::Analytic(s)) => write!(HashWriter(&mut h), "{s:?}"),
+            Some(LeafDesc::Swept(s)) => write!(HashWriter(&mut h), "{s:?}"),
+            Some(LeafDesc::GenCyl(s)) => write!(HashWriter(&mut h), "{s:?}"),
+            None => Ok(()),
+        };
         if let Ok(t) = world.get::<&Transform>(e) {
             for v in t.0.to_cols_array() {
                 v.to_bits().hash(&mut h);
