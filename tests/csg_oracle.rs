@@ -42,6 +42,37 @@ fn random_csg_spans_match_point_classification() {
 }
 
 #[test]
+fn random_csg_with_meshes_nearest_hit_is_first_surface() {
+    // Meshes answer nearest-hit queries from a pruned walk that stops just past
+    // their first entry; the evaluator redoes the query in full when that was not
+    // enough. Both must agree with the full Roth diagram and with the model.
+    let seed = 0xc5_9002u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut st = Check::default();
+    let (mut hits, mut mesh_trees) = (0, 0);
+    for case in 0..200 {
+        let tree = random_tree_with(&mut rng, 3, true);
+        mesh_trees += tree.json().contains("mesh") as usize;
+        let scene = bake(std::slice::from_ref(&tree));
+        let f = |p: DVec3| tree.inside(p);
+        for r in 0..30 {
+            let (o, d) = random_ray(&mut rng);
+            let ray = to_ray(o, d);
+            let spans = scene.spans(&ray, 0);
+            check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("case {case} ray {r} tree {}", tree.json()), &mut st);
+            let hit = scene.intersect(&ray);
+            let expect = spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None });
+            assert_eq!(hit.map(|h| h.t), expect, "case {case} ray {r}: nearest hit vs spans {spans:?} tree {}", tree.json());
+            hits += hit.is_some() as usize;
+        }
+    }
+    println!("{st:?} max span-end error {:.3e}; {hits} hits; {mesh_trees} trees with meshes", st.max_err);
+    remove_octa_meshes();
+    assert!(mesh_trees > 80 && hits > 1500);
+}
+
+#[test]
 fn wide_nodes_match_narrow_evaluation() {
     // A difference with 200 subtrahends and a union of 150 leaves (both get BVHs)
     // against the model; rays through the dense part.

@@ -16,6 +16,9 @@ pub enum Shape {
     Cone { a: DVec3, b: DVec3, ra: f64, rb: f64 },
     Torus { c: DVec3, axis: DVec3, major: f64, minor: f64 },
     Plane { n: DVec3, d: f64 },
+    /// A triangle mesh (OBJ file at `path`) of the octahedron `|p - c|_1 <= r`,
+    /// its faces subdivided: flat, so the model classifies it exactly.
+    Octa { c: DVec3, r: f64, path: String },
     Union(Vec<Shape>),
     Inter(Vec<Shape>),
     Diff(Vec<Shape>),
@@ -53,6 +56,7 @@ impl Shape {
                 (rad - major).powi(2) + z * z <= minor * minor
             }
             Shape::Plane { n, d } => n.dot(p) <= *d,
+            Shape::Octa { c, r, .. } => (p - *c).abs().element_sum() <= *r,
             Shape::Union(c) => c.iter().any(|s| s.inside(p)),
             Shape::Inter(c) => c.iter().all(|s| s.inside(p)),
             Shape::Diff(c) => c[0].inside(p) && !c[1..].iter().any(|s| s.inside(p)),
@@ -78,6 +82,7 @@ impl Shape {
                 v(*axis)
             ),
             Shape::Plane { n, d } => format!("{{\"plane\":{{\"normal\":{},\"offset\":{d:?}}}}}", v(*n)),
+            Shape::Octa { path, .. } => format!("{{\"mesh\":{{\"path\":{path:?}}}}}"),
             Shape::Union(c) | Shape::Inter(c) | Shape::Diff(c) => {
                 let k = match self {
                     Shape::Union(_) => "union",
@@ -166,15 +171,77 @@ pub fn random_xf(rng: &mut SmallRng, s: Shape) -> Shape {
     Shape::Xf { m, json, s: Box::new(s) }
 }
 
+/// The octahedron `|p - c|_1 <= r` as an OBJ file (each face split into
+/// `4^levels` triangles), written to the temp directory.
+pub fn octa_mesh(c: DVec3, r: f64, levels: u32) -> Shape {
+    static COUNT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let k = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("rothray-oracle-{}-{k}.obj", std::process::id()));
+    let mut obj = String::new();
+    let mut nv = 0;
+    let n = 1usize << levels;
+    for sx in [-1.0, 1.0] {
+        for sy in [-1.0, 1.0] {
+            for sz in [-1.0f64, 1.0] {
+                // Face corners on the axes; counter-clockwise seen from outside.
+                let (a, mut b, mut cc) = (DVec3::new(sx, 0.0, 0.0), DVec3::new(0.0, sy, 0.0), DVec3::new(0.0, 0.0, sz));
+                if sx * sy * sz < 0.0 {
+                    std::mem::swap(&mut b, &mut cc);
+                }
+                // Integer weights: a vertex on a shared edge is bit-identical on both faces.
+                let p = |i: usize, j: usize| c + (a * (n - i - j) as f64 + b * i as f64 + cc * j as f64) * (r / n as f64);
+                let mut idx = std::collections::HashMap::new();
+                for i in 0..=n {
+                    for j in 0..=n - i {
+                        let q = p(i, j);
+                        writeln!(obj, "v {:?} {:?} {:?}", q.x, q.y, q.z).unwrap();
+                        nv += 1;
+                        idx.insert((i, j), nv);
+                    }
+                }
+                for i in 0..n {
+                    for j in 0..n - i {
+                        writeln!(obj, "f {} {} {}", idx[&(i, j)], idx[&(i + 1, j)], idx[&(i, j + 1)]).unwrap();
+                        if i + j + 1 < n {
+                            writeln!(obj, "f {} {} {}", idx[&(i + 1, j)], idx[&(i + 1, j + 1)], idx[&(i, j + 1)]).unwrap();
+                        }
+                    }
+                }
+            }
+        }
+    }
+    std::fs::write(&path, obj).expect("write the octahedron mesh");
+    Shape::Octa { c, r, path: path.to_string_lossy().into_owned() }
+}
+
+/// Deletes the mesh files [`octa_mesh`] wrote in this process.
+pub fn remove_octa_meshes() {
+    let prefix = format!("rothray-oracle-{}-", std::process::id());
+    for e in std::fs::read_dir(std::env::temp_dir()).into_iter().flatten().flatten() {
+        if e.file_name().to_string_lossy().starts_with(&prefix) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
 /// A random CSG tree of the given depth.
 pub fn random_tree(rng: &mut SmallRng, depth: u32) -> Shape {
+    random_tree_with(rng, depth, false)
+}
+
+/// [`random_tree`], with octahedron meshes among the leaves when `meshes`.
+pub fn random_tree_with(rng: &mut SmallRng, depth: u32, meshes: bool) -> Shape {
     if depth == 0 || rng.gen_bool(0.25) {
         let planes = rng.gen_bool(0.1);
-        let l = random_leaf(rng, planes);
+        let l = if meshes && rng.gen_bool(0.4) {
+            octa_mesh(rp(rng, 0.5), rng.gen_range(0.3..1.2), rng.gen_range(0..4))
+        } else {
+            random_leaf(rng, planes)
+        };
         return if rng.gen_bool(0.5) { random_xf(rng, l) } else { l };
     }
     let n = rng.gen_range(1..4);
-    let c: Vec<Shape> = (0..n).map(|_| random_tree(rng, depth - 1)).collect();
+    let c: Vec<Shape> = (0..n).map(|_| random_tree_with(rng, depth - 1, meshes)).collect();
     let s = match rng.gen_range(0..3) {
         0 => Shape::Union(c),
         1 => Shape::Inter(c),

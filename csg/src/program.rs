@@ -83,6 +83,16 @@ impl RayCtx {
     pub fn new(o: Vec3, d: Vec3, eps_world: f32) -> Self {
         RayCtx { o, d, inv_d: d.recip(), eps: eps_world / d.length() }
     }
+
+    /// The slack a leaf may stop at past its first entry in `mode` (`None`: all spans).
+    #[inline(always)]
+    fn nearest(&self, mode: Mode) -> Option<f32> {
+        match mode {
+            Mode::All => None,
+            Mode::Nearest => Some(4.0 * self.eps),
+            Mode::Before => Some(0.0),
+        }
+    }
 }
 
 /// What a query wants from an evaluation.
@@ -90,9 +100,14 @@ impl RayCtx {
 pub enum Mode {
     /// The whole Roth diagram on `[tmin, tmax]`.
     All,
-    /// Only the first surface: unions may shrink their range to the first entry
-    /// they have confirmed (the result is exact on the returned range).
+    /// Only the first surface: unions (and meshes) may stop a little past the
+    /// first entry they have confirmed (the result is exact on the returned
+    /// range, that entry included).
     Nearest,
+    /// What a subtrahend of a nearest-mode difference needs: exactness before
+    /// its first confirmed entry (the difference cannot start where the
+    /// subtrahend starts), so unions stop right at it.
+    Before,
 }
 
 struct Frame {
@@ -110,6 +125,8 @@ struct Frame {
     /// Length of `Scratch::cand` when the frame was pushed.
     cand_base: u32,
     done: bool,
+    /// How this node is evaluated (see [`Program::child_mode`]).
+    mode: Mode,
 }
 
 /// Per-thread scratch memory, reused across rays (no allocation per ray once warm).
@@ -250,8 +267,8 @@ impl Program {
     ) -> f32 {
         scratch.out.clear();
         if self.kind[root as usize] == NodeKind::Leaf {
-            leaves.spans(self.first[root as usize], ray.o, ray.d, tmin, tmax, &mut scratch.out);
-            return tmax;
+            let v = leaves.spans_for(self.first[root as usize], ray.o, ray.d, tmin, tmax, ray.nearest(mode), &mut scratch.out);
+            return v.min(tmax);
         }
         if self.bounds[root as usize].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
             return tmax;
@@ -266,12 +283,14 @@ impl Program {
                 Some(c) => {
                     let f = &scratch.frames[top];
                     let (ct0, ct1) = (f.tmin, f.tmax);
+                    let mode = self.child_mode(f.node as usize, f.next, f.mode);
                     if self.kind[c as usize] == NodeKind::Leaf {
                         let Scratch { frames, accs, tmp, leaf, .. } = scratch;
                         leaf.clear();
-                        leaves.spans(self.first[c as usize], ray.o, ray.d, ct0, ct1, leaf);
-                        // A leaf's spans are exact on the range it was asked for.
-                        self.absorb(&mut frames[top], &mut accs[top], tmp, leaf.as_slice(), f32::INFINITY, ray, mode);
+                        // A leaf's spans are exact on the range it was asked for (up to
+                        // `v` in nearest mode).
+                        let v = leaves.spans_for(self.first[c as usize], ray.o, ray.d, ct0, ct1, ray.nearest(mode), leaf);
+                        self.absorb(&mut frames[top], &mut accs[top], tmp, leaf.as_slice(), v, ray);
                     } else if self.leafy[c as usize] {
                         // Bottom-level inner node: evaluate in place, no frame.
                         let cu = c as usize;
@@ -290,7 +309,7 @@ impl Program {
                         } else {
                             self.leaf_union(cu, ray, ct0, ct1, mode, leaves, leaf, tmp, sub)
                         };
-                        self.absorb(&mut frames[top], &mut accs[top], tmp, sub.as_slice(), valid, ray, mode);
+                        self.absorb(&mut frames[top], &mut accs[top], tmp, sub.as_slice(), valid, ray);
                     } else {
                         self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
                     }
@@ -311,11 +330,27 @@ impl Program {
                         rest[0].as_slice(),
                         f.valid,
                         ray,
-                        mode,
                     );
                     rest[0].clear();
                 }
             }
+        }
+    }
+
+    /// The mode of the operand of node `n` at position `next - 1` when `n` is
+    /// evaluated in `mode`. A subtrahend is needed only before its first entry
+    /// ([`Mode::Before`]). An intersection's first operand needs all its spans:
+    /// cut short at its first entry it would leave the others nothing to meet and
+    /// the whole query would be redone; the later operands are evaluated from the
+    /// first one's entry on (one that covers it has no real entry there and is
+    /// not cut short).
+    #[inline(always)]
+    fn child_mode(&self, n: usize, next: u32, mode: Mode) -> Mode {
+        match (mode, self.kind[n]) {
+            (Mode::All, _) => Mode::All,
+            (_, NodeKind::Intersection) if next == 1 => Mode::All,
+            (_, NodeKind::Difference) if next > 1 => Mode::Before,
+            _ => mode,
         }
     }
 
@@ -340,6 +375,7 @@ impl Program {
             valid: f32::INFINITY,
             cand_base: scratch.cand.len() as u32,
             done: false,
+            mode,
         };
         let depth = scratch.frames.len();
         if scratch.accs.len() <= depth {
@@ -395,17 +431,29 @@ impl Program {
             // No box test first: for a leaf the kernel is about as cheap, and a miss
             // gives no span, which has the same effect (measured with callgrind on
             // scenes/logo: the box tests were ~8% of the instructions).
-            if k == 0 || (kind == NodeKind::Union && acc.is_empty()) {
-                leaves.spans(self.first[c], ray.o, ray.d, lo, hi, acc);
+            let nearest = ray.nearest(self.child_mode(n, k as u32 + 1, mode));
+            let v = if k == 0 || (kind == NodeKind::Union && acc.is_empty()) {
+                leaves.spans_for(self.first[c], ray.o, ray.d, lo, hi, nearest, acc)
             } else {
                 leaf.clear();
-                leaves.spans(self.first[c], ray.o, ray.d, lo, hi, leaf);
-                combine_into(op, acc, leaf.as_slice(), ray.eps, tmp);
+                let v = leaves.spans_for(self.first[c], ray.o, ray.d, lo, hi, nearest, leaf);
+                if !leaf.is_empty() {
+                    combine_into(op, acc, leaf.as_slice(), ray.eps, tmp);
+                } else if op == Op::Intersection {
+                    acc.clear();
+                } // else: an empty union operand or subtrahend changes nothing
+                v
+            };
+            if v < valid {
+                // The operand stopped early: so does the result.
+                valid = v;
+                hi = hi.min(v);
+                acc.truncate_at(v);
             }
             match kind {
                 NodeKind::Union => {
-                    if mode == Mode::Nearest {
-                        if let Some(t) = stop_at_first_entry(acc, hi) {
+                    if mode != Mode::All {
+                        if let Some(t) = stop_at_first_entry(acc, hi, mode, ray.eps) {
                             hi = t;
                             valid = t;
                         }
@@ -447,7 +495,12 @@ impl Program {
         let mut visit = |pos: u32, acc: &mut SpanList, hi: &mut f32, valid: &mut f32| {
             let c = self.children[(first + pos) as usize];
             leaf.clear();
-            leaves.spans(self.first[c as usize], ray.o, ray.d, tmin, *hi, leaf);
+            let v = leaves.spans_for(self.first[c as usize], ray.o, ray.d, tmin, *hi, ray.nearest(mode), leaf);
+            if v < *valid {
+                *valid = v;
+                *hi = hi.min(v);
+                acc.truncate_at(v);
+            }
             if leaf.is_empty() {
                 return;
             }
@@ -456,8 +509,8 @@ impl Program {
             } else {
                 combine_into(Op::Union, acc, leaf.as_slice(), ray.eps, tmp);
             }
-            if mode == Mode::Nearest {
-                if let Some(t) = stop_at_first_entry(acc, *hi) {
+            if mode != Mode::All {
+                if let Some(t) = stop_at_first_entry(acc, *hi, mode, ray.eps) {
                     *hi = t;
                     *valid = t;
                 }
@@ -563,16 +616,8 @@ impl Program {
 
     /// Folds a child's result into frame `top`.
     #[allow(clippy::too_many_arguments)]
-    fn absorb(
-        &self,
-        f: &mut Frame,
-        acc: &mut SpanList,
-        tmp: &mut SpanList,
-        r: &[Span],
-        r_valid: f32,
-        ray: &RayCtx,
-        mode: Mode,
-    ) {
+    fn absorb(&self, f: &mut Frame, acc: &mut SpanList, tmp: &mut SpanList, r: &[Span], r_valid: f32, ray: &RayCtx) {
+        let mode = f.mode;
         let kind = self.kind[f.node as usize];
         if r_valid < f.valid {
             f.valid = r_valid;
@@ -589,8 +634,8 @@ impl Program {
         }
         match kind {
             NodeKind::Union => {
-                if mode == Mode::Nearest {
-                    if let Some(t) = stop_at_first_entry(acc, f.tmax) {
+                if mode != Mode::All {
+                    if let Some(t) = stop_at_first_entry(acc, f.tmax, mode, ray.eps) {
                         f.valid = t;
                         f.tmax = t;
                     }
@@ -659,15 +704,28 @@ impl Program {
 
 }
 
-/// Nearest mode: a union is needed only up to its first confirmed entry (the
-/// query's answer is there or before). Truncates `acc` there and returns it
-/// when that is before `hi`.
+/// A union in [`Mode::Nearest`] is needed only a little past its first confirmed
+/// entry `t0` (the query's answer is there or before): truncates `acc` at
+/// `v = t0 + 4 eps` and returns `v` when that is before `hi`. The result stays
+/// exact on `[tmin, v]`, and the first span `[t0, v]` keeps its real entry and is
+/// long enough to survive the short-span rule of `combine`. (Truncating at `t0`
+/// itself dropped that span: every such ray came back empty and was evaluated a
+/// second time in full, half the rays of `scenes/forest`.) In [`Mode::Before`]
+/// (a subtrahend) only `[tmin, t0)` matters: truncates at `t0`.
 #[inline(always)]
-fn stop_at_first_entry(acc: &mut SpanList, hi: f32) -> Option<f32> {
+fn stop_at_first_entry(acc: &mut SpanList, hi: f32, mode: Mode, eps: f32) -> Option<f32> {
     let s = *acc.as_slice().first()?;
-    if s.s0.is_real() && s.t0 < hi {
-        acc.truncate_at(s.t0);
-        Some(s.t0)
+    if !s.s0.is_real() {
+        return None;
+    }
+    let v = match mode {
+        Mode::All => return None,
+        Mode::Nearest => (s.t0 + 4.0 * eps).max(s.t0.next_up()),
+        Mode::Before => s.t0,
+    };
+    if v < hi {
+        acc.truncate_at(v);
+        Some(v)
     } else {
         None
     }

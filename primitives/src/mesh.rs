@@ -969,30 +969,9 @@ impl MeshData {
                 // Collect to the box exit: the crossings past tmax tell how deep inside
                 // the ray is at tmin (the signed count over the whole line is zero).
                 self.for_each_crossing(o, d, tmin, f32::INFINITY, |c| xs.push(c));
-                // Entering first on ties, so touching pieces merge instead of splitting.
-                let sign = |c: &Crossing| if c.front { self.orient } else { -self.orient };
-                sort_crossings(&mut xs, |c| sign(c) > 0.0);
-                let mut count: i32 = 0;
-                for c in &xs {
-                    count -= sign(c) as i32;
-                }
-                let mut start = (tmin, Surf::NONE);
-                for c in &xs {
-                    if c.t > tmax {
-                        break;
-                    }
-                    let s = sign(c) as i32;
-                    let next = count + s;
-                    if count <= 0 && next > 0 {
-                        start = (c.t, self.surf(leaf, c, true));
-                    } else if count > 0 && next <= 0 {
-                        push_clipped(out, start.0, start.1, c.t, self.surf(leaf, c, false), tmin, tmax);
-                    }
-                    count = next;
-                }
-                if count > 0 {
-                    push_clipped(out, start.0, start.1, tmax, Surf::NONE, tmin, tmax);
-                }
+                self.sort_signed(&mut xs);
+                let count: i32 = xs.iter().map(|c| -self.sign(c)).sum();
+                self.walk_signed(&xs, count, tmin, tmax, leaf, out);
             }
             InsideRule::Winding => {
                 let Some(&root) = self.bvh.nodes.first() else { return };
@@ -1036,6 +1015,144 @@ impl MeshData {
                 }
                 if inside {
                     push_clipped(out, start.0, start.1, hi, end_surf(hi, tmax), tmin, tmax);
+                }
+            }
+        }
+    }
+
+    /// +1 where a crossing enters the solid (orientation rule), -1 where it leaves.
+    #[inline(always)]
+    fn sign(&self, c: &Crossing) -> i32 {
+        if c.front == (self.orient > 0.0) { 1 } else { -1 }
+    }
+
+    /// Sorts crossings by t, entering first on ties (touching pieces merge
+    /// instead of splitting).
+    #[inline]
+    fn sort_signed(&self, xs: &mut [Crossing]) {
+        sort_crossings(xs, |c| self.sign(c) > 0);
+    }
+
+    /// Spans of sorted signed crossings, given the winding count at `tmin`,
+    /// clipped to `[tmin, tmax]`.
+    fn walk_signed<S: SpanSink + ?Sized>(&self, xs: &[Crossing], mut count: i32, tmin: f32, tmax: f32, leaf: u32, out: &mut S) {
+        let mut start = (tmin, Surf::NONE);
+        for c in xs {
+            if c.t > tmax {
+                break;
+            }
+            let next = count + self.sign(c);
+            if count <= 0 && next > 0 {
+                start = (c.t, self.surf(leaf, c, true));
+            } else if count > 0 && next <= 0 {
+                push_clipped(out, start.0, start.1, c.t, self.surf(leaf, c, false), tmin, tmax);
+            }
+            count = next;
+        }
+        if count > 0 {
+            push_clipped(out, start.0, start.1, tmax, Surf::NONE, tmin, tmax);
+        }
+    }
+
+    /// [`MeshData::spans`] for a nearest-hit query: only the first entry is sure to
+    /// be reported. The BVH is walked front to back like [`MeshData::closest_hit`],
+    /// pruned at `v` = the nearest crossing so far plus `slack` (the caller's fusing
+    /// tolerance, in t); every crossing up to `v` is found, so the spans pushed are
+    /// exact on `[tmin, v]` (none lies past it) and `v` is returned. Falls back to
+    /// the full query (returning infinity) where the count at `tmin` is not known
+    /// to be zero (the point at `tmin` inside the bounds) or for the winding rule.
+    pub fn spans_nearest<S: SpanSink + ?Sized>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        slack: f32,
+        leaf: u32,
+        out: &mut S,
+    ) -> f32 {
+        if !(tmax >= tmin) || self.wide.is_empty() {
+            return f32::INFINITY;
+        }
+        let p = o + d * tmin;
+        let pad = (self.bounds.max - self.bounds.min) * 1e-4;
+        let outside = p.cmplt(self.bounds.min - pad).any() || p.cmpgt(self.bounds.max + pad).any();
+        if self.rule != InsideRule::Orientation || !outside || !p.is_finite() {
+            self.spans(o, d, tmin, tmax, leaf, out);
+            return f32::INFINITY;
+        }
+        let r = WoopRay::new(o, d);
+        let r4 = wide::TriRay4::new(&r);
+        let rb = wide::Ray4::new(o, d);
+        let mut xs: SmallVec<[Crossing; 32]> = SmallVec::new();
+        // `cut`: the nearest crossing so far plus the slack (only decreases).
+        let mut cut = tmax;
+        let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
+        let mut cur = 0u32;
+        loop {
+            if cur & wide::LEAF != 0 {
+                let blk = self.wide.block(cur);
+                match blk.test(&r4, tmin, cut) {
+                    wide::Block::Hits(mut m, t, det) => {
+                        while m != 0 {
+                            let l = m.trailing_zeros();
+                            m &= m - 1;
+                            let t = t[l as usize];
+                            xs.push(Crossing { t, slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
+                            cut = cut.min((t + slack).max(t.next_up()));
+                        }
+                    }
+                    wide::Block::Exact => {
+                        for slot in blk.slots() {
+                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, &r, tmin, cut) {
+                                xs.push(Crossing { t, slot, front });
+                                cut = cut.min((t + slack).max(t.next_up()));
+                            }
+                        }
+                    }
+                }
+            } else {
+                let n = self.wide.node(cur);
+                let (m, tn) = rb.hit(n, tmin, cut);
+                if m != 0 {
+                    if m & (m - 1) == 0 {
+                        cur = n.child(m.trailing_zeros());
+                        continue;
+                    }
+                    // Two to four hits: sort by entry (descending), push all but the nearest.
+                    let mut e: SmallVec<[(u32, f32); 4]> = SmallVec::new();
+                    let mut mm = m;
+                    while mm != 0 {
+                        let s = mm.trailing_zeros();
+                        mm &= mm - 1;
+                        let item = (n.child(s), tn[s as usize]);
+                        let mut j = e.len();
+                        e.push(item);
+                        while j > 0 && e[j - 1].1 < item.1 {
+                            e[j] = e[j - 1];
+                            j -= 1;
+                        }
+                        e[j] = item;
+                    }
+                    let last = e.len() - 1;
+                    for &x in &e[..last] {
+                        stack.push(x);
+                    }
+                    cur = e[last].0;
+                    continue;
+                }
+            }
+            loop {
+                let Some((c, t)) = stack.pop() else {
+                    // Crossings found before `cut` shrank may lie past it: not all
+                    // of their neighbours were seen.
+                    self.sort_signed(&mut xs);
+                    self.walk_signed(&xs, 0, tmin, cut.min(tmax), leaf, out);
+                    return cut;
+                };
+                if t - t.abs() * SLAB_EPS <= cut {
+                    cur = c;
+                    break;
                 }
             }
         }

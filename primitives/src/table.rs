@@ -500,6 +500,32 @@ impl LeafTable {
         }
     }
 
+    /// [`LeafTable::spans`], or, when `nearest` is `Some(slack)`, what a
+    /// nearest-hit query needs: leaves whose full span list is costly (meshes)
+    /// may stop `slack` (in t) past their first entry. The spans pushed are exact
+    /// on `[tmin, v]` and none lies past `v`, the value returned (infinity when
+    /// the answer is the full one).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn spans_for<S: SpanSink + ?Sized>(&self, i: u32, o: Vec3, d: Vec3, tmin: f32, tmax: f32, nearest: Option<f32>, out: &mut S) -> f32 {
+        if let Some(slack) = nearest {
+            if self.kind[i as usize] == LeafKind::Mesh {
+                return self.mesh_nearest(i, o, d, tmin, tmax, slack, out);
+            }
+        }
+        self.spans(i, o, d, tmin, tmax, out);
+        f32::INFINITY
+    }
+
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    fn mesh_nearest<S: SpanSink + ?Sized>(&self, i: u32, o: Vec3, d: Vec3, tmin: f32, tmax: f32, slack: f32, out: &mut S) -> f32 {
+        let iu = i as usize;
+        let m = &self.to_local[iu];
+        let mesh = &self.meshes[self.ext[iu] as usize];
+        mesh.spans_nearest(m.transform_point3(o), m.transform_vector3(d), tmin, tmax, slack, i, out)
+    }
+
     /// Is the world point inside leaf `i` (boundary included)?
     pub fn contains(&self, i: u32, p: Vec3) -> bool {
         let iu = i as usize;
