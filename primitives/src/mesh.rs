@@ -713,7 +713,8 @@ impl MeshData {
         let mut thi = tmax;
         // Front to back: the nearest hit child is visited next, the others pushed
         // far first; popped entries beyond the best hit so far are skipped.
-        let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
+        let mut stack = [(0u32, 0.0f32); STACK];
+        let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             if cur & wide::LEAF != 0 {
@@ -748,30 +749,37 @@ impl MeshData {
                         continue;
                     }
                     // Two to four hits: sort by entry (descending), push all but the nearest.
-                    let mut e: SmallVec<[(u32, f32); 4]> = SmallVec::new();
+                    let mut e = [(0u32, 0.0f32); 4];
+                    let mut ne = 0;
                     let mut mm = m;
                     while mm != 0 {
                         let s = mm.trailing_zeros();
                         mm &= mm - 1;
                         let item = (n.child(s), tn[s as usize]);
-                        let mut j = e.len();
-                        e.push(item);
+                        let mut j = ne;
+                        ne += 1;
                         while j > 0 && e[j - 1].1 < item.1 {
                             e[j] = e[j - 1];
                             j -= 1;
                         }
                         e[j] = item;
                     }
-                    let last = e.len() - 1;
-                    for &x in &e[..last] {
-                        stack.push(x);
+                    if sp + ne > STACK {
+                        // A degenerate tree deeper than the stack: the binary walk.
+                        return self.closest_hit_pairs(o, d, tmin, tmax);
                     }
-                    cur = e[last].0;
+                    stack[sp..sp + ne - 1].copy_from_slice(&e[..ne - 1]);
+                    sp += ne - 1;
+                    cur = e[ne - 1].0;
                     continue;
                 }
             }
             loop {
-                let Some((c, t)) = stack.pop() else { return best };
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                let (c, t) = stack[sp];
                 if t - t.abs() * SLAB_EPS <= thi {
                     cur = c;
                     break;
@@ -878,7 +886,8 @@ impl MeshData {
             }
         }
         // (child code, rays that reached it, their smallest entry parameter)
-        let mut stack: SmallVec<[(u32, u32, f32); 64]> = SmallVec::new();
+        let mut stack = [(0u32, 0u32, 0.0f32); STACK];
+        let mut sp = 0usize;
         let (mut cur, mut mask) = (0u32, active);
         loop {
             if cur & wide::LEAF != 0 {
@@ -914,32 +923,39 @@ impl MeshData {
                 let n = self.wide.node(cur);
                 let thi4 = [Vec4::from_slice(&thi[..4]), Vec4::from_slice(&thi[4..])];
                 let h = p.hit(n, &tlo4, &thi4);
-                let mut e: SmallVec<[(u32, u32, f32); 4]> = SmallVec::new();
+                let mut e = [(0u32, 0u32, 0.0f32); 4];
+                let mut ne = 0;
                 for (s, &(m, t)) in h.iter().enumerate() {
                     let m = m & mask;
                     if m == 0 {
                         continue;
                     }
                     let item = (n.child(s as u32), m, t);
-                    let mut j = e.len();
-                    e.push(item);
+                    let mut j = ne;
+                    ne += 1;
                     while j > 0 && e[j - 1].2 < item.2 {
                         e[j] = e[j - 1];
                         j -= 1;
                     }
                     e[j] = item;
                 }
-                if let Some(&(c, m, _)) = e.last() {
-                    let last = e.len() - 1;
-                    for &x in &e[..last] {
-                        stack.push(x);
+                if ne > 0 {
+                    if sp + ne > STACK {
+                        // A degenerate tree deeper than the stack: ray by ray.
+                        return std::array::from_fn(|k| self.closest_hit(o[k], d[k], tmin[k], tmax[k]));
                     }
-                    (cur, mask) = (c, m);
+                    stack[sp..sp + ne - 1].copy_from_slice(&e[..ne - 1]);
+                    sp += ne - 1;
+                    (cur, mask) = (e[ne - 1].0, e[ne - 1].1);
                     continue;
                 }
             }
             loop {
-                let Some((c, m, t)) = stack.pop() else { return best };
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                let (c, m, t) = stack[sp];
                 // `t` is at most each ray's own entry: rays whose best hit is nearer drop out.
                 let mut m2 = 0;
                 let tt = t - t.abs() * SLAB_EPS;
