@@ -270,8 +270,19 @@ impl Program {
             let v = leaves.spans_for(self.first[root as usize], ray.o, ray.d, tmin, tmax, ray.nearest(mode), &mut scratch.out);
             return v.min(tmax);
         }
-        if self.bounds[root as usize].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
+        let r = root as usize;
+        if self.bounds[r].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
             return tmax;
+        }
+        if self.leafy[r] && (self.wide[r] == u32::MAX || self.kind[r] == NodeKind::Union) {
+            // One loop over leaves: no frame to push and pop.
+            let Scratch { out, leaf, tmp, .. } = scratch;
+            let valid = if self.wide[r] == u32::MAX {
+                self.leaf_node(r, ray, tmin, tmax, mode, leaves, leaf, tmp, out)
+            } else {
+                self.leaf_union(r, ray, tmin, tmax, mode, leaves, leaf, tmp, out)
+            };
+            return valid.min(tmax);
         }
         let base = scratch.frames.len();
         self.push_frame(root, tmin, tmax, ray, mode, leaves, scratch);

@@ -257,7 +257,7 @@ const SLAB_EPS: f32 = 1e-6;
 
 /// Traversal stack entries of the fixed-size walks (a 4-wide tree pushes at most
 /// three per level).
-const STACK: usize = 128;
+const STACK: usize = 64;
 
 impl RayBox {
     #[inline(always)]
