@@ -46,7 +46,7 @@
 use glam::{DVec3, Vec3};
 use smallvec::SmallVec;
 
-use crate::poly::{cubic_range, negative_on_unit, roots_in_tol};
+use crate::poly::{bern_restrict, bern_roots, cubic_range, roots_in_tol, to_bernstein};
 
 /// An unmerged span `(t0, sub0, t1, sub1)`.
 type RawSpan = (f32, u32, f32, u32);
@@ -346,16 +346,18 @@ impl SweptSphereData {
                 dp[j + k] += r[j] * r[k] - cx[j] * cx[k] - cy[j] * cy[k] - cz[j] * cz[k];
             }
         }
-        // D < 0 on the whole segment: the ray misses this piece of tube. Halving
-        // the control polygon three times culls most near misses before any root
-        // finding (roots were ~60% of `scenes/sweep`'s trace time).
-        if negative_on_unit(&dp, 3) {
+        // D's Bernstein coefficients all negative: the ray misses this piece of
+        // tube (most rays that enter the box but miss). Near misses with a sign
+        // change in the control polygon are settled by the isolation below,
+        // whose subdivision stops as soon as no sign change is left.
+        let bd = to_bernstein(&dp);
+        if bd.iter().all(|&x| x < 0.0) {
             return;
         }
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let nr = roots_in_tol(&dp, 0.0, 1.0, self.tol, &mut roots);
+        let nr = bern_roots(&bd, &dp, 0.0, 1.0, self.tol, &mut roots);
         // Breakpoints 0, roots, 1; pieces with D > 0 inside, merged into ranges.
-        let mut pts: SmallVec<[f64; 8]> = SmallVec::new();
+        let mut pts: SmallVec<[f64; 14]> = SmallVec::new();
         pts.push(0.0);
         for &x in &roots[..nr] {
             if x > *pts.last().unwrap() && x < 1.0 {
@@ -396,6 +398,7 @@ impl SweptSphereData {
                 e[j + k] -= dd[j] * dd[k];
             }
         }
+        let be = to_bernstein(&e);
         let s_pm = |u: f64| {
             let h = eval(&dp, u).max(0.0).sqrt();
             let m = eval(&a, u);
@@ -406,7 +409,9 @@ impl SweptSphereData {
             let (l1, h1) = s_pm(u1);
             lo = lo.min(l1);
             hi = hi.max(h1);
-            let ne = roots_in_tol(&e, u0, u1, self.tol, &mut roots);
+            let mut br = be;
+            bern_restrict(&mut br, u0, u1);
+            let ne = bern_roots(&br, &e, u0, u1, self.tol, &mut roots);
             for &u in &roots[..ne] {
                 let (l, h) = s_pm(u);
                 lo = lo.min(l);
