@@ -249,8 +249,9 @@ pub fn to_bernstein<const N: usize>(a: &[f64; N]) -> [f64; N] {
     for i in 0..N {
         b[i] = a[i] * INV_BINOM[n][i];
     }
-    for r in 0..n {
-        for k in (r + 1..=n).rev() {
+    // Exclusive ranges only: inclusive ones stay as loops with extra checks.
+    for r in 1..N {
+        for k in (r..N).rev() {
             b[k] += b[k - 1];
         }
     }
@@ -263,12 +264,11 @@ pub fn to_bernstein<const N: usize>(a: &[f64; N]) -> [f64; N] {
 /// end coefficients are the polynomial's values at `t0` and `t1` up to rounding.
 #[inline]
 pub fn bern_restrict<const N: usize>(b: &mut [f64; N], t0: f64, t1: f64) {
-    let n = N - 1;
     if t1 < 1.0 {
         // After pass r, b[r - 1] is the left polygon's coefficient r - 1.
         let (s, t) = (1.0 - t1, t1);
-        for r in 1..=n {
-            for i in (r..=n).rev() {
+        for r in 1..N {
+            for i in (r..N).rev() {
                 b[i] = s * b[i - 1] + t * b[i];
             }
         }
@@ -276,9 +276,9 @@ pub fn bern_restrict<const N: usize>(b: &mut [f64; N], t0: f64, t1: f64) {
     if t0 > 0.0 && t1 > 0.0 {
         let t = t0 / t1;
         let s = 1.0 - t;
-        // After pass r, b[n - r + 1] is the right polygon's coefficient n - r + 1.
-        for r in 1..=n {
-            for i in 0..=n - r {
+        // After pass r, b[N - r] is the right polygon's coefficient N - r.
+        for r in 1..N {
+            for i in 0..N - r {
                 b[i] = s * b[i] + t * b[i + 1];
             }
         }
@@ -346,6 +346,15 @@ impl<const N: usize> BernIso<'_, N> {
         self.visits += 1;
         if self.failed || self.visits > BERN_BUDGET {
             self.failed = true;
+            return;
+        }
+        // All coefficients of one sign (the common case): no root.
+        let (mut lo, mut hi) = (b[0], b[0]);
+        for &x in &b[1..] {
+            lo = if x < lo { x } else { lo };
+            hi = if x > hi { x } else { hi };
+        }
+        if lo > 0.0 || hi < 0.0 {
             return;
         }
         // Sign variations, zeros skipped (Descartes' rule in the Bernstein basis:

@@ -46,7 +46,7 @@
 use glam::{DVec3, Vec3};
 use smallvec::SmallVec;
 
-use crate::poly::{bern_restrict, bern_roots, cubic_range, roots_in_tol, to_bernstein};
+use crate::poly::{bern_restrict, bern_roots, cubic_range, roots_bern, to_bernstein};
 
 /// An unmerged span `(t0, sub0, t1, sub1)`.
 type RawSpan = (f32, u32, f32, u32);
@@ -134,7 +134,8 @@ impl Seg {
             best = (1.0, g1);
         }
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let n = roots_in_tol(&dg[..6], 0.0, 1.0, 1e-14, &mut roots);
+        let dg: &[f64; 6] = dg[..6].try_into().unwrap();
+        let n = roots_bern(dg, 0.0, 1.0, 1e-14, &mut roots);
         for &u in &roots[..n] {
             let v = eval(&g, u);
             if v < best.1 {
