@@ -348,40 +348,39 @@ impl<const N: usize> BernIso<'_, N> {
             self.failed = true;
             return;
         }
-        // All coefficients of one sign (the common case): no root.
-        let (mut lo, mut hi) = (b[0], b[0]);
-        for &x in &b[1..] {
-            lo = if x < lo { x } else { lo };
-            hi = if x > hi { x } else { hi };
+        // Sign patterns as bit masks: all coefficients of one sign (the common
+        // case) means no root.
+        let (mut neg, mut pos) = (0u32, 0u32);
+        for k in 0..N {
+            neg |= ((b[k] < 0.0) as u32) << k;
+            pos |= ((b[k] > 0.0) as u32) << k;
         }
-        if lo > 0.0 || hi < 0.0 {
+        if neg == 0 || pos == 0 {
             return;
         }
         // Sign variations, zeros skipped (Descartes' rule in the Bernstein basis:
-        // an upper bound of the roots in (a, z), of the same parity).
-        let mut v = 0;
-        let mut first = 0.0;
-        let mut prev = 0.0;
-        let mut k0 = 0;
-        for k in 0..N {
-            let x = b[k];
-            if x == 0.0 {
-                continue;
-            }
-            if prev == 0.0 {
-                first = x;
-            } else if (x < 0.0) != (prev < 0.0) {
-                v += 1;
-                k0 = k;
-                if v >= 2 {
-                    break;
+        // an upper bound of the roots in (a, z), of the same parity); `k0` is
+        // where the last counted one ends, `first` the sign at `a`.
+        let (v, k0, first) = if neg | pos == (1u32 << N) - 1 {
+            let ch = (neg ^ (neg >> 1)) & ((1u32 << (N - 1)) - 1);
+            (ch.count_ones(), ch.trailing_zeros() as usize + 1, neg & 1 != 0)
+        } else {
+            let (mut v, mut k0, mut first, mut prev) = (0, 0, false, 0.0);
+            for k in 0..N {
+                let x = b[k];
+                if x == 0.0 {
+                    continue;
                 }
+                if prev == 0.0 {
+                    first = x < 0.0;
+                } else if (x < 0.0) != (prev < 0.0) {
+                    v += 1;
+                    k0 = k;
+                }
+                prev = x;
             }
-            prev = x;
-        }
-        if v == 0 {
-            return;
-        }
+            (v, k0, first)
+        };
         let w = z - a;
         if v == 1 {
             // One root in (a, z). Start where the control polygon crosses zero
@@ -393,7 +392,7 @@ impl<const N: usize> BernIso<'_, N> {
             let (p, q) = (b[kp], b[k0]);
             let f = (kp as f64 + (k0 - kp) as f64 * p / (p - q)) / (N - 1) as f64;
             let x0 = (a + w * f).clamp(a, z);
-            let r = refine_bracket(self.c, a, z, first < 0.0, x0, self.eps);
+            let r = refine_bracket(self.c, a, z, first, x0, self.eps);
             self.push(r);
             return;
         }

@@ -98,6 +98,8 @@ impl SweptSphere {
 struct Seg {
     c: [[f64; 4]; 3],
     r: [f64; 4],
+    /// `r(u)^2` (degree 6).
+    r2: [f64; 7],
     center: DVec3,
 }
 
@@ -172,6 +174,19 @@ fn deriv<const N: usize>(c: &[f64; N]) -> [f64; N] {
         d[i - 1] = c[i] * i as f64;
     }
     d
+}
+
+/// `p^2` (`M = 2N - 1` coefficients), each unordered pair of products once.
+fn square<const N: usize, const M: usize>(p: &[f64; N]) -> [f64; M] {
+    debug_assert_eq!(M, 2 * N - 1);
+    let mut q = [0.0; M];
+    for j in 0..N {
+        q[2 * j] += p[j] * p[j];
+        for k in j + 1..N {
+            q[j + k] += 2.0 * p[j] * p[k];
+        }
+    }
+    q
 }
 
 fn bezier_to_monomial(p: [f64; 4]) -> [f64; 4] {
@@ -265,7 +280,7 @@ impl SweptSphereData {
                 live.push(i as u32);
                 bounds = bounds.union(&b);
             }
-            segs.push(Seg { c, r, center: b.center().as_dvec3() });
+            segs.push(Seg { c, r, r2: square(&r), center: b.center().as_dvec3() });
             boxes.push(b);
         }
         let bvh = if live.len() > BVH_MIN_SEGMENTS {
@@ -340,11 +355,12 @@ impl SweptSphereData {
             cy[k] = c.y;
             cz[k] = c.z;
         }
-        let r = &seg.r;
-        let mut dp = [0.0f64; 7];
+        // D = r^2 - |w x n|^2 (the products once per unordered pair).
+        let mut dp = seg.r2;
         for j in 0..4 {
-            for k in 0..4 {
-                dp[j + k] += r[j] * r[k] - cx[j] * cx[k] - cy[j] * cy[k] - cz[j] * cz[k];
+            dp[2 * j] -= cx[j] * cx[j] + cy[j] * cy[j] + cz[j] * cz[j];
+            for k in j + 1..4 {
+                dp[j + k] -= 2.0 * (cx[j] * cx[k] + cy[j] * cy[k] + cz[j] * cz[k]);
             }
         }
         // D's Bernstein coefficients all negative: the ray misses this piece of
@@ -380,24 +396,17 @@ impl SweptSphereData {
             return;
         }
         // E = 4 a'^2 D - D'^2 (degree 10): stationary points of s- and s+.
-        let da = [a[1], 2.0 * a[2], 3.0 * a[3]];
-        let mut da2 = [0.0; 5];
-        for j in 0..3 {
-            for k in 0..3 {
-                da2[j + k] += da[j] * da[k];
-            }
-        }
+        let da2: [f64; 5] = square(&[2.0 * a[1], 4.0 * a[2], 6.0 * a[3]]);
         let dd = deriv(&dp);
+        let dd2: [f64; 11] = square(&[dd[0], dd[1], dd[2], dd[3], dd[4], dd[5]]);
         let mut e = [0.0f64; 11];
         for j in 0..5 {
             for k in 0..7 {
-                e[j + k] += 4.0 * da2[j] * dp[k];
+                e[j + k] += da2[j] * dp[k];
             }
         }
-        for j in 0..6 {
-            for k in 0..6 {
-                e[j + k] -= dd[j] * dd[k];
-            }
+        for k in 0..11 {
+            e[k] -= dd2[k];
         }
         let be = to_bernstein(&e);
         let s_pm = |u: f64| {
