@@ -350,18 +350,31 @@ impl<const N: usize> BernIso<'_, N> {
         }
         // Sign patterns as bit masks: all coefficients of one sign (the common
         // case) means no root.
-        let (mut neg, mut pos) = (0u32, 0u32);
-        for k in 0..N {
-            neg |= ((b[k] < 0.0) as u32) << k;
-            pos |= ((b[k] > 0.0) as u32) << k;
+        // (Sign bits: a zero may be -0.0, so zeros are detected apart.)
+        let full = (1u32 << N) - 1;
+        let mut neg = 0u32;
+        let mut amin = f64::INFINITY;
+        for (k, &x) in b.iter().enumerate() {
+            neg |= ((x.to_bits() >> 63) as u32) << k;
+            amin = amin.min(x.abs());
         }
+        let (neg, pos) = if amin > 0.0 {
+            (neg, !neg & full)
+        } else {
+            let (mut n, mut p) = (0u32, 0u32);
+            for (k, &x) in b.iter().enumerate() {
+                n |= ((x < 0.0) as u32) << k;
+                p |= ((x > 0.0) as u32) << k;
+            }
+            (n, p)
+        };
         if neg == 0 || pos == 0 {
             return;
         }
         // Sign variations, zeros skipped (Descartes' rule in the Bernstein basis:
         // an upper bound of the roots in (a, z), of the same parity); `k0` is
         // where the last counted one ends, `first` the sign at `a`.
-        let (v, k0, first) = if neg | pos == (1u32 << N) - 1 {
+        let (v, k0, first) = if neg | pos == full {
             let ch = (neg ^ (neg >> 1)) & ((1u32 << (N - 1)) - 1);
             (ch.count_ones(), ch.trailing_zeros() as usize + 1, neg & 1 != 0)
         } else {
@@ -456,7 +469,7 @@ pub fn bern_roots<const N: usize>(
     // that the signs at the ends agree with the polishing's evaluations (they
     // may differ in the last bits, which matters for a root at an end).
     let mut b = *b;
-    b[0] = eval(c, lo);
+    b[0] = if lo == 0.0 { c[0] } else { eval(c, lo) };
     b[N - 1] = eval(c, hi);
     let mut st = BernIso { c, eps, out, count: 0, visits: 0, failed: false };
     if b[0] == 0.0 {
