@@ -288,9 +288,13 @@ pub fn bern_restrict<const N: usize>(b: &mut [f64; N], t0: f64, t1: f64) {
 /// Safeguarded Newton on `c` in the bracket `(a, b)` holding one sign change
 /// (`neg_at_a`: the sign just right of `a`), from `x`; Newton steps that leave the
 /// bracket become bisections. Stops when a step or the bracket is below
-/// `max(eps, 1e-15 (1 + |x|))`.
+/// `tol = max(eps, 1e-15 (1 + |x|))`, or when two Newton steps in a row show
+/// quadratic convergence that puts the next iterate within `tol / 10` of the
+/// root (error after a step `s_k` about `K s_k^2`, `K ~ s_k / s_{k-1}^2`): that
+/// saves the evaluation that would only confirm it.
 #[inline]
 fn refine_bracket<const N: usize>(c: &[f64; N], mut a: f64, mut b: f64, neg_at_a: bool, mut x: f64, eps: f64) -> f64 {
+    let mut prev = f64::INFINITY; // last Newton step length (infinite after a bisection)
     for _ in 0..100 {
         let (f, df) = eval_d(c, x);
         if f == 0.0 {
@@ -298,13 +302,19 @@ fn refine_bracket<const N: usize>(c: &[f64; N], mut a: f64, mut b: f64, neg_at_a
         }
         if (f < 0.0) == neg_at_a { a = x } else { b = x }
         let mut nx = x - f / df;
-        if !(nx > a && nx < b) {
+        let newton = nx > a && nx < b;
+        if !newton {
             nx = 0.5 * (a + b);
         }
         let tol = eps.max(1e-15 * (1.0 + x.abs()));
-        if (nx - x).abs() <= tol || b - a <= tol {
+        let s = (nx - x).abs();
+        if s <= tol || b - a <= tol {
             return nx;
         }
+        if newton && prev.is_finite() && s < 0.5 * prev && s * s * s <= 0.1 * tol * prev * prev {
+            return nx;
+        }
+        prev = if newton { s } else { f64::INFINITY };
         x = nx;
     }
     x
