@@ -1,11 +1,20 @@
-//! Real roots of polynomials on an interval, in f64.
+//! Real roots of polynomials on an interval, in f64. Degrees up to [`MAX_DEGREE`].
 //!
-//! Roots are isolated by the roots of the derivative (recursively): between two
-//! consecutive critical points a polynomial is monotonic, so it has at most one root
-//! there, found by safeguarded Newton (Newton steps that leave the bracket fall back
-//! to bisection). This never misses a simple root, finds both roots of a
-//! near-tangent (grazing) pair as long as the minimum between them is negative in
-//! f64, and converges to full f64 precision. Degrees up to [`MAX_DEGREE`].
+//! Two isolators, both polishing by safeguarded Newton (Newton steps that leave
+//! the bracket fall back to bisection):
+//!
+//! * [`roots_in`] / [`roots_in_tol`]: isolation by the roots of the derivative
+//!   (recursively): between two consecutive critical points a polynomial is
+//!   monotonic, so it has at most one root there. This never misses a simple
+//!   root, finds both roots of a near-tangent (grazing) pair as long as the
+//!   minimum between them is negative in f64, and reports exactly the roots.
+//!   Costly at high degree (a whole chain of derivatives, each polished).
+//! * [`bern_roots`] / [`roots_bern`]: Bernstein subdivision (Descartes' rule of
+//!   signs on an interval, de Casteljau halving). Several times cheaper at
+//!   degree 6-10, never misses a simple root farther than the tolerance from the
+//!   others, but returns *candidates*: an interval still ambiguous at the
+//!   tolerance (a cluster, a tangency) reports its midpoint. For callers that
+//!   only evaluate something at the points, or split at them.
 
 /// Largest supported degree.
 pub const MAX_DEGREE: usize = 12;

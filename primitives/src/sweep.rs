@@ -18,8 +18,21 @@
 //! are `s-+` at stationary points (where an error `e` in `u` moves `s` by
 //! `O(e^2)`) and at `u = 0, 1` (the round end balls, exact). That is why this is
 //! exact to f32 precision in `t` and has none of the dark spots of the degree-10
-//! elimination POV-Ray uses. A segment whose Bernstein bound of `D` is negative is
-//! skipped before any root finding (rays that enter its box but miss the tube).
+//! elimination POV-Ray uses.
+//!
+//! Roots are isolated by Bernstein subdivision ([`crate::poly::bern_roots`]:
+//! sign variations of the Bernstein coefficients on an interval, de Casteljau
+//! halving, safeguarded Newton once an interval holds a single sign change).
+//! `D`'s Bernstein coefficients on `[0, 1]` come first: all negative, the ray
+//! misses this piece of tube (most rays that enter its box but miss) and no
+//! root is looked for; near misses end in the isolation, which stops
+//! subdividing where no sign change is left. `E`'s coefficients are built once
+//! per segment and restricted to each range by de Casteljau. The isolator
+//! returns candidates: every simple root farther than the tolerance from the
+//! others, and possibly extra points (an interval still ambiguous at the
+//! tolerance reports its midpoint). Extra points are harmless here: `D`'s roots
+//! only split `[0, 1]` into pieces classified by `D`'s sign at their
+//! midpoints, and `s-+` at any `u` of a range are points inside the sweep.
 //!
 //! Segments overlap at their joints; their spans are merged (sorted, disjoint).
 //! A BVH over the segments' tight boxes is used for chains of more than
@@ -31,11 +44,16 @@
 //! `[1e-14, 1e-2]`). Since span ends sit at stationary points, the error in `t`
 //! relative to the sweep's size is of the order of `tolerance^2` times the
 //! segment's (dimensionless) curvature. Measured on the benchmark scene's camera
-//! rays (960x540, test `sweep_bench`, release): 1e-6 (default) and tighter give
-//! span ends identical in f32 to 1e-12, 204 ns/ray on average (8% of the rays
-//! hit); 1e-4 moves ends by <= 5e-7 in t, 179 ns/ray; 1e-3 by <= 6e-5; 1e-2
-//! loses grazing spans. The knob is cheap to leave at the default: most of
-//! the time goes into isolating roots, not polishing them.
+//! rays (960x540, 8% of them hit; test `sweep_bench`,
+//! `cargo test -p rothray-primitives --release sweep_bench -- --ignored --nocapture`,
+//! one thread on a shared 2-core machine, +-10%): 1e-6 (default) and tighter
+//! give span ends identical in f32 to 1e-12, 83-85 ns/ray on average at 1e-6
+//! and 89-91 at 1e-9 (150 and 170 with the derivative-chain isolation of
+//! `roots_in_tol`, measured alongside); 1e-4 moves ends by <= 5e-7 in t, 82
+//! ns/ray; 1e-3 by <= 1e-5 and 1e-2 by <= 4e-3, both at 95-100 ns/ray (no span
+//! lost on these rays, but coarser is not faster). The knob is cheap to leave
+//! at the default: most of the time goes into isolating roots, not polishing
+//! them.
 //!
 //! # Sub-surface ids and normals
 //! A crossing's `sub` is the index of the segment it lies on. [`SweptSphereData::normal`]
