@@ -294,22 +294,37 @@ pub fn bern_restrict<const N: usize>(b: &mut [f64; N], t0: f64, t1: f64) {
     }
 }
 
-/// Safeguarded Newton on `c` in the bracket `(a, b)` holding one sign change
+/// Safeguarded Newton in the bracket `(a, b)` holding one sign change
 /// (`neg_at_a`: the sign just right of `a`), from `x`; Newton steps that leave the
 /// bracket become bisections. Stops when a step or the bracket is below
 /// `tol = max(eps, 1e-15 (1 + |x|))`, or when two Newton steps in a row show
 /// quadratic convergence that puts the next iterate within `tol / 10` of the
 /// root (error after a step `s_k` about `K s_k^2`, `K ~ s_k / s_{k-1}^2`): that
 /// saves the evaluation that would only confirm it.
-#[inline]
-fn refine_bracket<const N: usize>(c: &[f64; N], mut a: f64, mut b: f64, neg_at_a: bool, mut x: f64, eps: f64) -> f64 {
-    let mut prev = f64::INFINITY; // last Newton step length (infinite after a bisection)
-    for _ in 0..100 {
-        let (f, df) = eval_d(c, x);
+#[derive(Clone, Copy)]
+struct Newton {
+    a: f64,
+    b: f64,
+    neg_at_a: bool,
+    x: f64,
+    /// Last Newton step length (infinite after a bisection).
+    prev: f64,
+}
+
+impl Newton {
+    fn new(a: f64, b: f64, neg_at_a: bool, x: f64) -> Self {
+        Newton { a, b, neg_at_a, x, prev: f64::INFINITY }
+    }
+
+    /// One step from the value and derivative at `self.x`: the root when done.
+    #[inline(always)]
+    fn step(&mut self, f: f64, df: f64, eps: f64) -> Option<f64> {
+        let x = self.x;
         if f == 0.0 {
-            return x;
+            return Some(x);
         }
-        if (f < 0.0) == neg_at_a { a = x } else { b = x }
+        if (f < 0.0) == self.neg_at_a { self.a = x } else { self.b = x }
+        let (a, b) = (self.a, self.b);
         let mut nx = x - f / df;
         let newton = nx > a && nx < b;
         if !newton {
@@ -318,15 +333,56 @@ fn refine_bracket<const N: usize>(c: &[f64; N], mut a: f64, mut b: f64, neg_at_a
         let tol = eps.max(1e-15 * (1.0 + x.abs()));
         let s = (nx - x).abs();
         if s <= tol || b - a <= tol {
-            return nx;
+            return Some(nx);
         }
+        let prev = self.prev;
         if newton && prev.is_finite() && s < 0.5 * prev && s * s * s <= 0.1 * tol * prev * prev {
-            return nx;
+            return Some(nx);
         }
-        prev = if newton { s } else { f64::INFINITY };
-        x = nx;
+        self.prev = if newton { s } else { f64::INFINITY };
+        self.x = nx;
+        None
     }
-    x
+}
+
+/// [`Newton`] on `c` to the end (at most 100 steps).
+#[inline]
+fn refine_bracket<const N: usize>(c: &[f64; N], mut nt: Newton, eps: f64) -> f64 {
+    for _ in 0..100 {
+        let (f, df) = eval_d(c, nt.x);
+        if let Some(r) = nt.step(f, df, eps) {
+            return r;
+        }
+    }
+    nt.x
+}
+
+/// Two [`refine_bracket`]s at once, their evaluations interleaved (Horner is
+/// latency bound: two independent chains cost about as much as one). Each
+/// root is exactly what `refine_bracket` gives.
+#[inline]
+fn refine_pair<const N: usize>(c: &[f64; N], mut n0: Newton, mut n1: Newton, eps: f64) -> (f64, f64) {
+    let (mut r0, mut r1) = (None, None);
+    for _ in 0..100 {
+        let (x0, x1) = (n0.x, n1.x);
+        let (mut p0, mut d0, mut p1, mut d1) = (0.0, 0.0, 0.0, 0.0);
+        for &k in c.iter().rev() {
+            d0 = d0 * x0 + p0;
+            p0 = p0 * x0 + k;
+            d1 = d1 * x1 + p1;
+            p1 = p1 * x1 + k;
+        }
+        if r0.is_none() {
+            r0 = n0.step(p0, d0, eps);
+        }
+        if r1.is_none() {
+            r1 = n1.step(p1, d1, eps);
+        }
+        if r0.is_some() && r1.is_some() {
+            break;
+        }
+    }
+    (r0.unwrap_or(n0.x), r1.unwrap_or(n1.x))
 }
 
 /// Deepest subdivision of [`bern_roots`] (2^-52 of the interval is f64's
@@ -343,12 +399,14 @@ struct BernIso<'a, const N: usize> {
     eps: f64,
     out: &'a mut [f64; MAX_DEGREE],
     count: usize,
+    /// A bracket waiting for a second one, to be polished together.
+    pending: Option<Newton>,
     visits: u32,
     failed: bool,
 }
 
 impl<const N: usize> BernIso<'_, N> {
-    fn push(&mut self, x: f64) {
+    fn push_value(&mut self, x: f64) {
         if self.count > 0 && self.out[self.count - 1] >= x {
             return;
         }
@@ -358,6 +416,32 @@ impl<const N: usize> BernIso<'_, N> {
         }
         self.out[self.count] = x;
         self.count += 1;
+    }
+
+    /// Polishes the pending bracket, if any, and pushes its root.
+    fn flush(&mut self) {
+        if let Some(nt) = self.pending.take() {
+            let r = refine_bracket(self.c, nt, self.eps);
+            self.push_value(r);
+        }
+    }
+
+    /// A candidate point (after the pending root, which lies to its left).
+    fn push(&mut self, x: f64) {
+        self.flush();
+        self.push_value(x);
+    }
+
+    /// A bracket: kept until a second one comes, then both are polished at once.
+    fn push_bracket(&mut self, nt: Newton) {
+        match self.pending.take() {
+            None => self.pending = Some(nt),
+            Some(p) => {
+                let (r0, r1) = refine_pair(self.c, p, nt, self.eps);
+                self.push_value(r0);
+                self.push_value(r1);
+            }
+        }
     }
 
     /// `b`: the Bernstein coefficients on `[a, z]`.
@@ -424,8 +508,7 @@ impl<const N: usize> BernIso<'_, N> {
             let (p, q) = (b[kp], b[k0]);
             let f = (kp as f64 + (k0 - kp) as f64 * p / (p - q)) / (N - 1) as f64;
             let x0 = (a + w * f).clamp(a, z);
-            let r = refine_bracket(self.c, a, z, first, x0, self.eps);
-            self.push(r);
+            self.push_bracket(Newton::new(a, z, first, x0));
             return;
         }
         let m = 0.5 * (a + z);
@@ -490,7 +573,7 @@ pub fn bern_roots<const N: usize>(
     let mut b = *b;
     b[0] = if lo == 0.0 { c[0] } else { eval(c, lo) };
     b[N - 1] = eval(c, hi);
-    let mut st = BernIso { c, eps, out, count: 0, visits: 0, failed: false };
+    let mut st = BernIso { c, eps, out, count: 0, pending: None, visits: 0, failed: false };
     if b[0] == 0.0 {
         st.push(lo);
     }
@@ -500,6 +583,7 @@ pub fn bern_roots<const N: usize>(
     if b[N - 1] == 0.0 {
         st.push(hi);
     }
+    st.flush();
     if st.failed {
         return roots_in_tol(c, lo, hi, eps, st.out);
     }
