@@ -55,11 +55,21 @@
 //! a cross-section plane of a straight or planar path (`A = 0` everywhere) is
 //! handled by intersecting it with that copy of the profile in its plane.
 //!
-//! Cost (test `gcyl_bench`, release, the benchmark scene's camera at 960x540
-//! on that scene's path, twist 45 degrees, ~6% of the rays hit): circle r = 0.3,
-//! 870-920 ns/ray on average; square 0.25, 1680 ns/ray at tolerance 1e-6 and
-//! 1250 ns/ray at 1e-3, where the coarser marching step already loses about
-//! 0.8% of the hit rays (grazing chords): keep the default for polygons.
+//! The roots of `H` and of `B'A - BA'` are isolated by Bernstein subdivision
+//! ([`crate::poly::bern_roots`]); its extra candidate points are harmless here
+//! (a candidate of `H` is polished or stays a breakpoint between pieces
+//! classified at their midpoints; one of `B'A - BA'` only adds a sigma
+//! evaluation inside the run). The planar case and the foot points keep
+//! [`crate::poly::roots_in_tol`], where every root found is used as a root.
+//!
+//! Cost (test `gcyl_bench`, `cargo test -p rothray-primitives --release
+//! gcyl_bench -- --ignored --nocapture`, the benchmark scene's camera at 960x540
+//! on that scene's path, twist 45 degrees, ~6% of the rays hit; one thread on a
+//! shared 2-core machine, +-10%): circle r = 0.3, 105-115 ns/ray on average
+//! (460-510 with the derivative-chain isolation of `roots_in_tol`); square
+//! 0.25, 660-690 ns/ray at tolerance 1e-6 (920) and 360-380 ns/ray at 1e-3
+//! (820), where the coarser marching step already loses about 0.8% of the hit
+//! rays (grazing chords): keep the default for polygons.
 
 use glam::{DVec2, DVec3, Vec3};
 use smallvec::SmallVec;
@@ -67,7 +77,7 @@ use smallvec::SmallVec;
 use crate::{
     aabb::Aabb,
     bvh::FlatBvh,
-    poly::{bernstein_min, cubic_range, roots_in_tol},
+    poly::{bern_roots, cubic_range, roots_bern, roots_in_tol, to_bernstein},
     sweep::{f32_down, f32_up, push_union_slack, BVH_MIN_SEGMENTS},
     ShapeError, SpanSink,
 };
@@ -612,12 +622,15 @@ impl GenCylData {
                 h[j + k] -= r2 * a[j] * a[k];
             }
         }
-        if bernstein_min(&h) > 0.0 {
+        let bh = to_bernstein(&h);
+        if bh.iter().all(|&x| x > 0.0) {
             return;
         }
         let utol = 1e-14;
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let nr = roots_in_tol(&h, 0.0, 1.0, utol, &mut roots);
+        // Extra candidate points are harmless: each is polished below (or stays
+        // a breakpoint between pieces classified at their midpoints).
+        let nr = bern_roots(&bh, &h, 0.0, 1.0, utol, &mut roots);
         let mut pts: SmallVec<[f64; 12]> = SmallVec::new();
         pts.push(0.0);
         for &x in &roots[..nr] {
@@ -705,7 +718,8 @@ impl GenCylData {
             if s1 > hi {
                 (hi, hi_sub) = (s1, s1_sub);
             }
-            let n = roots_in_tol(&sp, u0, u1, utol, &mut roots);
+            // Candidates only add sigma evaluations inside the run.
+            let n = roots_bern(&sp, u0, u1, utol, &mut roots);
             for &u in &roots[..n] {
                 if u <= u0 || u >= u1 {
                     continue;

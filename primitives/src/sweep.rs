@@ -18,8 +18,21 @@
 //! are `s-+` at stationary points (where an error `e` in `u` moves `s` by
 //! `O(e^2)`) and at `u = 0, 1` (the round end balls, exact). That is why this is
 //! exact to f32 precision in `t` and has none of the dark spots of the degree-10
-//! elimination POV-Ray uses. A segment whose Bernstein bound of `D` is negative is
-//! skipped before any root finding (rays that enter its box but miss the tube).
+//! elimination POV-Ray uses.
+//!
+//! Roots are isolated by Bernstein subdivision ([`crate::poly::bern_roots`]:
+//! sign variations of the Bernstein coefficients on an interval, de Casteljau
+//! halving, safeguarded Newton once an interval holds a single sign change).
+//! `D`'s Bernstein coefficients on `[0, 1]` come first: all negative, the ray
+//! misses this piece of tube (most rays that enter its box but miss) and no
+//! root is looked for; near misses end in the isolation, which stops
+//! subdividing where no sign change is left. `E`'s coefficients are built once
+//! per segment and restricted to each range by de Casteljau. The isolator
+//! returns candidates: every simple root farther than the tolerance from the
+//! others, and possibly extra points (an interval still ambiguous at the
+//! tolerance reports its midpoint). Extra points are harmless here: `D`'s roots
+//! only split `[0, 1]` into pieces classified by `D`'s sign at their
+//! midpoints, and `s-+` at any `u` of a range are points inside the sweep.
 //!
 //! Segments overlap at their joints; their spans are merged (sorted, disjoint).
 //! A BVH over the segments' tight boxes is used for chains of more than
@@ -31,11 +44,16 @@
 //! `[1e-14, 1e-2]`). Since span ends sit at stationary points, the error in `t`
 //! relative to the sweep's size is of the order of `tolerance^2` times the
 //! segment's (dimensionless) curvature. Measured on the benchmark scene's camera
-//! rays (960x540, test `sweep_bench`, release): 1e-6 (default) and tighter give
-//! span ends identical in f32 to 1e-12, 204 ns/ray on average (8% of the rays
-//! hit); 1e-4 moves ends by <= 5e-7 in t, 179 ns/ray; 1e-3 by <= 6e-5; 1e-2
-//! loses grazing spans. The knob is cheap to leave at the default: most of
-//! the time goes into isolating roots, not polishing them.
+//! rays (960x540, 8% of them hit; test `sweep_bench`,
+//! `cargo test -p rothray-primitives --release sweep_bench -- --ignored --nocapture`,
+//! one thread on a shared 2-core machine, +-10%): 1e-6 (default) and tighter
+//! give span ends identical in f32 to 1e-12, 83-85 ns/ray on average at 1e-6
+//! and 89-91 at 1e-9 (150 and 170 with the derivative-chain isolation of
+//! `roots_in_tol`, measured alongside); 1e-4 moves ends by <= 5e-7 in t, 82
+//! ns/ray; 1e-3 by <= 1e-5 and 1e-2 by <= 4e-3, both at 95-100 ns/ray (no span
+//! lost on these rays, but coarser is not faster). The knob is cheap to leave
+//! at the default: most of the time goes into isolating roots, not polishing
+//! them.
 //!
 //! # Sub-surface ids and normals
 //! A crossing's `sub` is the index of the segment it lies on. [`SweptSphereData::normal`]
@@ -46,7 +64,7 @@
 use glam::{DVec3, Vec3};
 use smallvec::SmallVec;
 
-use crate::poly::{cubic_range, negative_on_unit, roots_in_tol};
+use crate::poly::{bern_restrict, bern_roots, cubic_range, roots_bern, to_bernstein};
 
 /// An unmerged span `(t0, sub0, t1, sub1)`.
 type RawSpan = (f32, u32, f32, u32);
@@ -98,6 +116,8 @@ impl SweptSphere {
 struct Seg {
     c: [[f64; 4]; 3],
     r: [f64; 4],
+    /// `r(u)^2` (degree 6).
+    r2: [f64; 7],
     center: DVec3,
 }
 
@@ -134,7 +154,8 @@ impl Seg {
             best = (1.0, g1);
         }
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let n = roots_in_tol(&dg[..6], 0.0, 1.0, 1e-14, &mut roots);
+        let dg: &[f64; 6] = dg[..6].try_into().unwrap();
+        let n = roots_bern(dg, 0.0, 1.0, 1e-14, &mut roots);
         for &u in &roots[..n] {
             let v = eval(&g, u);
             if v < best.1 {
@@ -171,6 +192,19 @@ fn deriv<const N: usize>(c: &[f64; N]) -> [f64; N] {
         d[i - 1] = c[i] * i as f64;
     }
     d
+}
+
+/// `p^2` (`M = 2N - 1` coefficients), each unordered pair of products once.
+fn square<const N: usize, const M: usize>(p: &[f64; N]) -> [f64; M] {
+    debug_assert_eq!(M, 2 * N - 1);
+    let mut q = [0.0; M];
+    for j in 0..N {
+        q[2 * j] += p[j] * p[j];
+        for k in j + 1..N {
+            q[j + k] += 2.0 * p[j] * p[k];
+        }
+    }
+    q
 }
 
 fn bezier_to_monomial(p: [f64; 4]) -> [f64; 4] {
@@ -264,7 +298,7 @@ impl SweptSphereData {
                 live.push(i as u32);
                 bounds = bounds.union(&b);
             }
-            segs.push(Seg { c, r, center: b.center().as_dvec3() });
+            segs.push(Seg { c, r, r2: square(&r), center: b.center().as_dvec3() });
             boxes.push(b);
         }
         let bvh = if live.len() > BVH_MIN_SEGMENTS {
@@ -339,23 +373,26 @@ impl SweptSphereData {
             cy[k] = c.y;
             cz[k] = c.z;
         }
-        let r = &seg.r;
-        let mut dp = [0.0f64; 7];
+        // D = r^2 - |w x n|^2 (the products once per unordered pair).
+        let mut dp = seg.r2;
         for j in 0..4 {
-            for k in 0..4 {
-                dp[j + k] += r[j] * r[k] - cx[j] * cx[k] - cy[j] * cy[k] - cz[j] * cz[k];
+            dp[2 * j] -= cx[j] * cx[j] + cy[j] * cy[j] + cz[j] * cz[j];
+            for k in j + 1..4 {
+                dp[j + k] -= 2.0 * (cx[j] * cx[k] + cy[j] * cy[k] + cz[j] * cz[k]);
             }
         }
-        // D < 0 on the whole segment: the ray misses this piece of tube. Halving
-        // the control polygon three times culls most near misses before any root
-        // finding (roots were ~60% of `scenes/sweep`'s trace time).
-        if negative_on_unit(&dp, 3) {
+        // D's Bernstein coefficients all negative: the ray misses this piece of
+        // tube (most rays that enter the box but miss). Near misses with a sign
+        // change in the control polygon are settled by the isolation below,
+        // whose subdivision stops as soon as no sign change is left.
+        let bd = to_bernstein(&dp);
+        if bd.iter().all(|&x| x < 0.0) {
             return;
         }
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
-        let nr = roots_in_tol(&dp, 0.0, 1.0, self.tol, &mut roots);
+        let nr = bern_roots(&bd, &dp, 0.0, 1.0, self.tol, &mut roots);
         // Breakpoints 0, roots, 1; pieces with D > 0 inside, merged into ranges.
-        let mut pts: SmallVec<[f64; 8]> = SmallVec::new();
+        let mut pts: SmallVec<[f64; 14]> = SmallVec::new();
         pts.push(0.0);
         for &x in &roots[..nr] {
             if x > *pts.last().unwrap() && x < 1.0 {
@@ -377,25 +414,19 @@ impl SweptSphereData {
             return;
         }
         // E = 4 a'^2 D - D'^2 (degree 10): stationary points of s- and s+.
-        let da = [a[1], 2.0 * a[2], 3.0 * a[3]];
-        let mut da2 = [0.0; 5];
-        for j in 0..3 {
-            for k in 0..3 {
-                da2[j + k] += da[j] * da[k];
-            }
-        }
+        let da2: [f64; 5] = square(&[2.0 * a[1], 4.0 * a[2], 6.0 * a[3]]);
         let dd = deriv(&dp);
+        let dd2: [f64; 11] = square(&[dd[0], dd[1], dd[2], dd[3], dd[4], dd[5]]);
         let mut e = [0.0f64; 11];
         for j in 0..5 {
             for k in 0..7 {
-                e[j + k] += 4.0 * da2[j] * dp[k];
+                e[j + k] += da2[j] * dp[k];
             }
         }
-        for j in 0..6 {
-            for k in 0..6 {
-                e[j + k] -= dd[j] * dd[k];
-            }
+        for k in 0..11 {
+            e[k] -= dd2[k];
         }
+        let be = to_bernstein(&e);
         let s_pm = |u: f64| {
             let h = eval(&dp, u).max(0.0).sqrt();
             let m = eval(&a, u);
@@ -406,7 +437,9 @@ impl SweptSphereData {
             let (l1, h1) = s_pm(u1);
             lo = lo.min(l1);
             hi = hi.max(h1);
-            let ne = roots_in_tol(&e, u0, u1, self.tol, &mut roots);
+            let mut br = be;
+            bern_restrict(&mut br, u0, u1);
+            let ne = bern_roots(&br, &e, u0, u1, self.tol, &mut roots);
             for &u in &roots[..ne] {
                 let (l, h) = s_pm(u);
                 lo = lo.min(l);
