@@ -482,8 +482,7 @@ impl<const N: usize> BernIso<'_, N> {
             (ch.count_ones(), ch.trailing_zeros() as usize + 1, neg & 1 != 0)
         } else {
             let (mut v, mut k0, mut first, mut prev) = (0, 0, false, 0.0);
-            for k in 0..N {
-                let x = b[k];
+            for (k, &x) in b.iter().enumerate() {
                 if x == 0.0 {
                     continue;
                 }
