@@ -978,7 +978,8 @@ pub(crate) mod tests {
         };
         let (_, exact) = run(1e-12);
         for tol in [1e-2f32, 1e-3, 1e-4, 1e-6, 1e-9] {
-            let (ns, got) = run(tol);
+            // Best of 3: the machine is shared, other load only adds time.
+            let (ns, got) = (0..3).map(|_| run(tol)).min_by(|x, y| x.0.total_cmp(&y.0)).unwrap();
             let mut err = 0.0f32;
             let mut hits = 0;
             for (a, b) in got.iter().zip(&exact) {
@@ -991,7 +992,10 @@ pub(crate) mod tests {
                     err = err.max((x.t0 - y.t0).abs()).max((x.t1 - y.t1).abs());
                 }
             }
-            println!("tolerance {tol:e}: {ns:.0} ns/ray over {} rays ({hits} hit), max |dt| vs 1e-12: {err:e}", rays.len());
+            println!(
+                "tolerance {tol:e}: {ns:.0} ns/ray (best of 3) over {} rays ({hits} hit), max |dt| vs 1e-12: {err:e}",
+                rays.len()
+            );
         }
     }
 }
