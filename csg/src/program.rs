@@ -274,18 +274,12 @@ impl Program {
         if self.bounds[r].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
             return tmax;
         }
-        if self.leafy[r] && (self.wide[r] == u32::MAX || self.kind[r] == NodeKind::Union) {
-            // One loop over leaves: no frame to push and pop.
+        if self.frameless(r) {
             let Scratch { out, leaf, tmp, .. } = scratch;
-            let valid = if self.wide[r] == u32::MAX {
-                self.leaf_node(r, ray, tmin, tmax, mode, leaves, leaf, tmp, out)
-            } else {
-                self.leaf_union(r, ray, tmin, tmax, mode, leaves, leaf, tmp, out)
-            };
-            return valid.min(tmax);
+            return self.eval_frameless(r, ray, tmin, tmax, mode, leaves, leaf, tmp, out).min(tmax);
         }
         let base = scratch.frames.len();
-        self.push_frame(root, tmin, tmax, ray, mode, leaves, scratch);
+        self.push_frame(root, tmin, tmax, ray, mode, scratch);
         loop {
             // Pick the next child of the top frame.
             let top = scratch.frames.len() - 1;
@@ -302,27 +296,19 @@ impl Program {
                         // `v` in nearest mode).
                         let v = leaves.spans_for(self.first[c as usize], ray.o, ray.d, ct0, ct1, ray.nearest(mode), leaf);
                         self.absorb(&mut frames[top], &mut accs[top], tmp, leaf.as_slice(), v, ray);
-                    } else if self.leafy[c as usize] {
+                    } else if self.frameless(c as usize) {
                         // Bottom-level inner node: evaluate in place, no frame.
                         let cu = c as usize;
-                        let miss = self.bounds[cu].ray_range(ray.o, ray.inv_d, ct0, ct1).is_none();
-                        let narrow = self.wide[cu] == u32::MAX;
-                        if !miss && !narrow && self.kind[cu] != NodeKind::Union {
-                            self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
-                            continue;
-                        }
                         let Scratch { frames, accs, tmp, leaf, sub, .. } = scratch;
                         sub.clear();
-                        let valid = if miss {
+                        let valid = if self.bounds[cu].ray_range(ray.o, ray.inv_d, ct0, ct1).is_none() {
                             f32::INFINITY
-                        } else if narrow {
-                            self.leaf_node(cu, ray, ct0, ct1, mode, leaves, leaf, tmp, sub)
                         } else {
-                            self.leaf_union(cu, ray, ct0, ct1, mode, leaves, leaf, tmp, sub)
+                            self.eval_frameless(cu, ray, ct0, ct1, mode, leaves, leaf, tmp, sub)
                         };
                         self.absorb(&mut frames[top], &mut accs[top], tmp, sub.as_slice(), valid, ray);
                     } else {
-                        self.push_frame(c, ct0, ct1, ray, mode, leaves, scratch);
+                        self.push_frame(c, ct0, ct1, ray, mode, scratch);
                     }
                 }
                 None => {
@@ -365,7 +351,6 @@ impl Program {
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn push_frame(
         &self,
         node: u32,
@@ -373,7 +358,6 @@ impl Program {
         tmax: f32,
         ray: &RayCtx,
         mode: Mode,
-        leaves: &LeafTable,
         scratch: &mut Scratch,
     ) {
         let mut frame = Frame {
@@ -396,16 +380,6 @@ impl Program {
         let n = node as usize;
         if self.bounds[n].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
             frame.done = true;
-        } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX && self.leafy[n] {
-            // Every operand a leaf: one BVH walk with a shrinking range, no frames.
-            let Scratch { accs, leaf, tmp, .. } = scratch;
-            let valid = self.leaf_union(n, ray, tmin, tmax, mode, leaves, leaf, tmp, &mut accs[depth]);
-            frame.valid = valid;
-            frame.done = true;
-        } else if self.leafy[n] && self.wide[n] == u32::MAX {
-            let Scratch { accs, leaf, tmp, .. } = scratch;
-            frame.valid = self.leaf_node(n, ray, tmin, tmax, mode, leaves, leaf, tmp, &mut accs[depth]);
-            frame.done = true;
         } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX {
             let lo = scratch.cand.len();
             self.collect(n, 0, ray, tmin, tmax, scratch);
@@ -413,6 +387,36 @@ impl Program {
             frame.cand_hi = scratch.cand.len() as u32;
         }
         scratch.frames.push(frame);
+    }
+
+    /// Nodes evaluated in one loop over their leaf operands, without frames:
+    /// narrow nodes and wide unions whose operands are all leaves.
+    #[inline(always)]
+    fn frameless(&self, n: usize) -> bool {
+        self.leafy[n] && (self.wide[n] == u32::MAX || self.kind[n] == NodeKind::Union)
+    }
+
+    /// Evaluates a [`Program::frameless`] node into `acc`; returns where the result
+    /// stops being exact.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn eval_frameless(
+        &self,
+        n: usize,
+        ray: &RayCtx,
+        tmin: f32,
+        tmax: f32,
+        mode: Mode,
+        leaves: &LeafTable,
+        leaf: &mut SpanList,
+        tmp: &mut SpanList,
+        acc: &mut SpanList,
+    ) -> f32 {
+        if self.wide[n] == u32::MAX {
+            self.leaf_node(n, ray, tmin, tmax, mode, leaves, leaf, tmp, acc)
+        } else {
+            self.leaf_union(n, ray, tmin, tmax, mode, leaves, leaf, tmp, acc)
+        }
     }
 
     /// A narrow node whose operands are all leaves, in one loop with the same
