@@ -5,6 +5,23 @@ use glam::DVec3;
 use rand::{rngs::SmallRng, SeedableRng};
 
 use crate::oracle::*;
+use rothray::engine::RenderScene;
+
+/// One random ray through object 0 of `scene` (built from `tree`): its spans
+/// against the model, and the nearest hit against the first real surface of
+/// those spans. Returns whether the ray hit.
+fn check_random_ray(scene: &RenderScene, tree: &Shape, rng: &mut SmallRng, ctx: &str, st: &mut Check) -> bool {
+    let f = |p: DVec3| tree.inside(p);
+    let (o, d) = random_ray(rng);
+    let ray = to_ray(o, d);
+    let spans = scene.spans(&ray, 0);
+    check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("{ctx} tree {}", tree.json()), st);
+    // The nearest hit is the first real surface of the Roth diagram.
+    let hit = scene.intersect(&ray);
+    let expect = spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None });
+    assert_eq!(hit.map(|h| h.t), expect, "{ctx}: nearest hit vs spans {spans:?} tree {}", tree.json());
+    hit.is_some()
+}
 
 #[test]
 fn random_csg_spans_match_point_classification() {
@@ -17,14 +34,7 @@ fn random_csg_spans_match_point_classification() {
         let scene = bake(std::slice::from_ref(&tree));
         let f = |p: DVec3| tree.inside(p);
         for r in 0..30 {
-            let (o, d) = random_ray(&mut rng);
-            let ray = to_ray(o, d);
-            let spans = scene.spans(&ray, 0);
-            check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("case {case} ray {r} tree {}", tree.json()), &mut st);
-            // The nearest hit is the first real surface of the Roth diagram.
-            let hit = scene.intersect(&ray);
-            let expect = spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None });
-            assert_eq!(hit.map(|h| h.t), expect, "case {case} ray {r}: nearest hit vs spans {spans:?}");
+            check_random_ray(&scene, &tree, &mut rng, &format!("case {case} ray {r}"), &mut st);
             // Point queries agree with the model away from surfaces.
             let p = rp(&mut rng, 1.2);
             let near = |p: DVec3| (0..6).any(|k| {
@@ -55,16 +65,8 @@ fn random_csg_with_meshes_nearest_hit_is_first_surface() {
         let tree = random_tree_with(&mut rng, 3, true);
         mesh_trees += tree.json().contains("mesh") as usize;
         let scene = bake(std::slice::from_ref(&tree));
-        let f = |p: DVec3| tree.inside(p);
         for r in 0..30 {
-            let (o, d) = random_ray(&mut rng);
-            let ray = to_ray(o, d);
-            let spans = scene.spans(&ray, 0);
-            check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("case {case} ray {r} tree {}", tree.json()), &mut st);
-            let hit = scene.intersect(&ray);
-            let expect = spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None });
-            assert_eq!(hit.map(|h| h.t), expect, "case {case} ray {r}: nearest hit vs spans {spans:?} tree {}", tree.json());
-            hits += hit.is_some() as usize;
+            hits += check_random_ray(&scene, &tree, &mut rng, &format!("case {case} ray {r}"), &mut st) as usize;
         }
     }
     println!("{st:?} max span-end error {:.3e}; {hits} hits; {mesh_trees} trees with meshes", st.max_err);
