@@ -3,7 +3,7 @@
 //! 10 000 is fine) with Roth's early outs and a BVH inside every wide node.
 
 use glam::Vec3;
-use rothray_primitives::{bvh::FlatBvh, Aabb, LeafTable, Span, Surf};
+use rothray_primitives::{bvh::FlatBvh, table::push_clipped, Aabb, LeafTable, Span, SpanSink, Surf};
 
 use crate::spans::{combine_into, Op, SpanList};
 
@@ -66,7 +66,7 @@ pub struct Program {
 
 /// Per-ray constants.
 #[derive(Clone, Copy, Debug)]
-pub struct RayCtx {
+pub struct RayCtx<'a> {
     /// Origin.
     pub o: Vec3,
     /// Direction (not normalised; t is in its units).
@@ -75,13 +75,29 @@ pub struct RayCtx {
     pub inv_d: Vec3,
     /// Fusing tolerance in units of t.
     pub eps: f32,
+    /// Leaf results computed ahead by a packet query, and this ray's lane in it.
+    pub memo: Option<(&'a PacketMemo, usize)>,
 }
 
-impl RayCtx {
+impl RayCtx<'static> {
     /// A ray context; `eps_world` is the scene's length tolerance.
     #[inline]
     pub fn new(o: Vec3, d: Vec3, eps_world: f32) -> Self {
-        RayCtx { o, d, inv_d: d.recip(), eps: eps_world / d.length() }
+        RayCtx { o, d, inv_d: d.recip(), eps: eps_world / d.length(), memo: None }
+    }
+}
+
+impl RayCtx<'_> {
+    /// The same ray, served by lane `k` of `memo` where it can be.
+    #[inline]
+    pub fn with_memo<'b>(&self, memo: &'b PacketMemo, k: usize) -> RayCtx<'b> {
+        RayCtx { o: self.o, d: self.d, inv_d: self.inv_d, eps: self.eps, memo: Some((memo, k)) }
+    }
+
+    /// The slack of a leaf query in [`Mode::Nearest`].
+    #[inline]
+    pub fn nearest_slack(&self) -> f32 {
+        4.0 * self.eps
     }
 
     /// The slack a leaf may stop at past its first entry in `mode` (`None`: all spans).
@@ -89,7 +105,7 @@ impl RayCtx {
     fn nearest(&self, mode: Mode) -> Option<f32> {
         match mode {
             Mode::All => None,
-            Mode::Nearest => Some(4.0 * self.eps),
+            Mode::Nearest => Some(self.nearest_slack()),
             Mode::Before => Some(0.0),
         }
     }
@@ -108,6 +124,79 @@ pub enum Mode {
     /// its first confirmed entry (the difference cannot start where the
     /// subtrahend starts), so unions stop right at it.
     Before,
+}
+
+/// Nearest-mode leaf results computed ahead for a packet of eight rays (by
+/// [`LeafTable::mesh_nearest8`]), served to each ray's evaluation in place of
+/// the leaf's own query where they answer it exactly.
+#[derive(Debug, Default)]
+pub struct PacketMemo {
+    leaves: Vec<MemoLeaf>,
+    len: usize,
+}
+
+#[derive(Debug, Default)]
+struct MemoLeaf {
+    leaf: u32,
+    /// Lanes whose result is here.
+    done: u32,
+    tmin: [f32; 8],
+    tmax: [f32; 8],
+    /// Each lane's spans are exact on `[tmin, valid]`.
+    valid: [f32; 8],
+    spans: [Vec<Span>; 8],
+}
+
+impl PacketMemo {
+    /// Forgets every leaf (keeps the memory).
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Records leaf `leaf` queried on `[tmin[k], tmax[k]]` per lane: `fill` pushes
+    /// the lanes' spans and returns the lanes done and where each is exact.
+    pub fn add(&mut self, leaf: u32, tmin: &[f32; 8], tmax: &[f32; 8], fill: impl FnOnce(&mut [Vec<Span>; 8]) -> (u32, [f32; 8])) {
+        if self.leaves.len() == self.len {
+            self.leaves.push(MemoLeaf::default());
+        }
+        let e = &mut self.leaves[self.len];
+        for v in e.spans.iter_mut() {
+            v.clear();
+        }
+        let (done, valid) = fill(&mut e.spans);
+        (e.leaf, e.done, e.tmin, e.tmax, e.valid) = (leaf, done, *tmin, *tmax, valid);
+        if done != 0 {
+            self.len += 1;
+        }
+    }
+
+    /// Lane `k`'s spans of `leaf` on `[lo, hi]` and where they stop being exact,
+    /// when the recorded query covers that range (`None`: ask the leaf).
+    #[inline]
+    fn serve<S: SpanSink + ?Sized>(&self, k: usize, leaf: u32, lo: f32, hi: f32, out: &mut S) -> Option<f32> {
+        let e = self.leaves[..self.len].iter().find(|e| e.leaf == leaf)?;
+        let v = e.valid[k];
+        if e.done & (1 << k) == 0 || !(lo >= e.tmin[k] && hi <= e.tmax[k] && lo <= v) {
+            return None;
+        }
+        let end = hi.min(v);
+        for s in &e.spans[k] {
+            push_clipped(out, s.t0, s.s0, s.t1, s.s1, lo, end);
+        }
+        Some(if v >= hi { f32::INFINITY } else { v })
+    }
+}
+
+/// A leaf's query, from the ray's packet memo when it has the answer.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn leaf_spans<S: SpanSink + ?Sized>(leaves: &LeafTable, ray: &RayCtx, i: u32, lo: f32, hi: f32, nearest: Option<f32>, out: &mut S) -> f32 {
+    if let (Some((memo, k)), Some(_)) = (ray.memo, nearest) {
+        if let Some(v) = memo.serve(k, i, lo, hi, out) {
+            return v;
+        }
+    }
+    leaves.spans_for(i, ray.o, ray.d, lo, hi, nearest, out)
 }
 
 struct Frame {
@@ -267,7 +356,7 @@ impl Program {
     ) -> f32 {
         scratch.out.clear();
         if self.kind[root as usize] == NodeKind::Leaf {
-            let v = leaves.spans_for(self.first[root as usize], ray.o, ray.d, tmin, tmax, ray.nearest(mode), &mut scratch.out);
+            let v = leaf_spans(leaves, ray, self.first[root as usize], tmin, tmax, ray.nearest(mode), &mut scratch.out);
             return v.min(tmax);
         }
         let r = root as usize;
@@ -294,7 +383,7 @@ impl Program {
                         leaf.clear();
                         // A leaf's spans are exact on the range it was asked for (up to
                         // `v` in nearest mode).
-                        let v = leaves.spans_for(self.first[c as usize], ray.o, ray.d, ct0, ct1, ray.nearest(mode), leaf);
+                        let v = leaf_spans(leaves, ray, self.first[c as usize], ct0, ct1, ray.nearest(mode), leaf);
                         self.absorb(&mut frames[top], &mut accs[top], tmp, leaf.as_slice(), v, ray);
                     } else if self.frameless(c as usize) {
                         // Bottom-level inner node: evaluate in place, no frame.
@@ -448,10 +537,10 @@ impl Program {
             // scenes/logo: the box tests were ~8% of the instructions).
             let nearest = ray.nearest(self.child_mode(n, k as u32 + 1, mode));
             let v = if k == 0 || (kind == NodeKind::Union && acc.is_empty()) {
-                leaves.spans_for(self.first[c], ray.o, ray.d, lo, hi, nearest, acc)
+                leaf_spans(leaves, ray, self.first[c], lo, hi, nearest, acc)
             } else {
                 leaf.clear();
-                let v = leaves.spans_for(self.first[c], ray.o, ray.d, lo, hi, nearest, leaf);
+                let v = leaf_spans(leaves, ray, self.first[c], lo, hi, nearest, leaf);
                 if !leaf.is_empty() {
                     combine_into(op, acc, leaf.as_slice(), ray.eps, tmp);
                 } else if op == Op::Intersection {
@@ -510,7 +599,7 @@ impl Program {
         let mut visit = |pos: u32, acc: &mut SpanList, hi: &mut f32, valid: &mut f32| {
             let c = self.children[(first + pos) as usize];
             leaf.clear();
-            let v = leaves.spans_for(self.first[c as usize], ray.o, ray.d, tmin, *hi, ray.nearest(mode), leaf);
+            let v = leaf_spans(leaves, ray, self.first[c as usize], tmin, *hi, ray.nearest(mode), leaf);
             if v < *valid {
                 *valid = v;
                 *hi = hi.min(v);

@@ -5,8 +5,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use glam::Vec3;
 use rayon::prelude::*;
 use rothray_csg::Scratch;
+use smallvec::SmallVec;
 
-use crate::scene::{Hit, Ray, RenderScene};
+use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
 
 /// Pinhole camera of the scene format.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -256,8 +257,8 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     let mut dchunks: Vec<Option<&mut [f32]>> =
         if want_depth { depth.chunks_mut(w * ROWS).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
     out.par_chunks_mut(w * ROWS * 3).zip(dchunks.par_iter_mut()).enumerate().for_each_init(
-        Scratch::default,
-        |scratch, (chunk, (orows, drows))| {
+        PacketScratch::default,
+        |ps, (chunk, (orows, drows))| {
             let mut shadows = 0u64;
             let y0 = chunk * ROWS;
             let rows_here = orows.len() / (3 * w);
@@ -277,28 +278,41 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                     }
                     continue;
                 }
-                for r in 0..rows_here {
-                    let y = y0 + r;
-                    for x in x0..x1 {
-                        let mut acc = Vec3::ZERO;
-                        let mut dmin = f32::INFINITY;
+                // Blocks of 4x2 pixels: their camera rays go as one packet.
+                for r0 in (0..rows_here).step_by(2) {
+                    for bx in (x0..x1).step_by(4) {
+                        let px: SmallVec<[(usize, usize); 8]> =
+                            (r0..(r0 + 2).min(rows_here)).flat_map(|r| (bx..(bx + 4).min(x1)).map(move |x| (r, x))).collect();
+                        let mut acc = [Vec3::ZERO; 8];
+                        let mut dmin = [f32::INFINITY; 8];
                         for si in 0..spp {
-                            let (jx, jy) = if spp == 1 {
-                                (0.5, 0.5)
-                            } else {
-                                let rr = hash2((y * w + x) as u32, si);
-                                ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
-                            };
-                            let ray = rays.ray(x as f32 + jx, y as f32 + jy);
-                            let hit = scene.intersect_with(&ray, scratch);
-                            let smp = shade(scene, s, &ray, hit, scratch, &mut shadows);
-                            acc += smp.rgb;
-                            dmin = dmin.min(smp.depth);
+                            let rs: SmallVec<[Ray; 8]> = px
+                                .iter()
+                                .map(|&(r, x)| {
+                                    let y = y0 + r;
+                                    let (jx, jy) = if spp == 1 {
+                                        (0.5, 0.5)
+                                    } else {
+                                        let rr = hash2((y * w + x) as u32, si);
+                                        ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
+                                    };
+                                    rays.ray(x as f32 + jx, y as f32 + jy)
+                                })
+                                .collect();
+                            let mut hits = [None; 8];
+                            scene.intersect_packet(&rs, ps, &mut hits);
+                            for k in 0..rs.len() {
+                                let smp = shade(scene, s, &rs[k], hits[k], &mut ps.scratch, &mut shadows);
+                                acc[k] += smp.rgb;
+                                dmin[k] = dmin[k].min(smp.depth);
+                            }
                         }
-                        let i = r * w + x;
-                        orows[3 * i..3 * i + 3].copy_from_slice(&encode(acc / spp as f32));
-                        if let Some(d) = drows.as_deref_mut() {
-                            d[i] = dmin;
+                        for (k, &(r, x)) in px.iter().enumerate() {
+                            let i = r * w + x;
+                            orows[3 * i..3 * i + 3].copy_from_slice(&encode(acc[k] / spp as f32));
+                            if let Some(d) = drows.as_deref_mut() {
+                                d[i] = dmin[k];
+                            }
                         }
                     }
                 }

@@ -5,7 +5,7 @@ use std::cell::RefCell;
 
 use glam::{DAffine3, Vec3};
 use hecs::{Entity, World};
-use rothray_csg::{first_surface, Mode, Program, ProgramBuilder, RayCtx, Scratch};
+use rothray_csg::{first_surface, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 use rothray_primitives::{
     bvh::FlatBvh,
     gcyl::GenCylData,
@@ -162,6 +162,44 @@ pub struct RenderScene {
     /// to each shape's size (default 1e-6; see `rothray bench --tolerances`).
     pub tolerance: f32,
     fingerprint: u64,
+    /// Mesh leaves that nearest-hit queries ask in nearest mode, traced ahead for
+    /// whole packets by [`RenderScene::intersect_packet`] (empty when there are
+    /// more than [`PACKET_MESHES`]).
+    packet_meshes: Vec<u32>,
+}
+
+/// At most this many mesh leaves are traced ahead per packet; scenes with more
+/// go ray by ray.
+pub const PACKET_MESHES: usize = 4;
+
+/// Per-thread memory of [`RenderScene::intersect_packet`].
+#[derive(Default)]
+pub struct PacketScratch {
+    /// The single-ray scratch (also for shading).
+    pub scratch: Scratch,
+    memo: PacketMemo,
+}
+
+/// The mesh leaves of `roots` that a nearest-hit evaluation queries in nearest
+/// mode: those with no intersection's first operand on their path (that operand
+/// is evaluated in full, see `Program::child_mode`).
+fn nearest_mode_meshes(program: &Program, leaves: &LeafTable, roots: impl Iterator<Item = u32>) -> Vec<u32> {
+    let mut found = Vec::new();
+    let mut stack: Vec<u32> = roots.collect();
+    while let Some(n) = stack.pop() {
+        let nu = n as usize;
+        let (first, count) = (program.first[nu] as usize, program.count[nu] as usize);
+        match program.kind[nu] {
+            NodeKind::Leaf => {
+                if leaves.is_mesh(first as u32) && !found.contains(&(first as u32)) {
+                    found.push(first as u32);
+                }
+            }
+            NodeKind::Intersection => stack.extend_from_slice(&program.children[first + 1..first + count]),
+            _ => stack.extend_from_slice(&program.children[first..first + count]),
+        }
+    }
+    found
 }
 
 thread_local! {
@@ -459,6 +497,11 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     scene.leaf_info = leaf_info;
     scene.objects_bvh = bvh;
     scene.unbounded = unbounded;
+    let mut pm = nearest_mode_meshes(&scene.program, &scene.leaves, scene.objects.iter().map(|o| o.root));
+    if pm.len() > PACKET_MESHES {
+        pm.clear();
+    }
+    scene.packet_meshes = pm;
     scene.bounds = bounds;
     scene.eps = 1e-5 * diag;
     scene.center = if bounds.is_empty() { Vec3::ZERO } else { bounds.center() };
@@ -487,7 +530,7 @@ impl RenderScene {
     /// The per-ray context: the fusing tolerance grows with the distance from the
     /// scene, since f32 rounding of the crossings does.
     #[inline]
-    pub fn ray_ctx(&self, o: Vec3, d: Vec3) -> RayCtx {
+    pub fn ray_ctx(&self, o: Vec3, d: Vec3) -> RayCtx<'static> {
         let far = (o - self.center).length();
         RayCtx::new(o, d, self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 })
     }
@@ -532,6 +575,41 @@ impl RenderScene {
             return None;
         }
         let ctx = self.ray_ctx(ray.origin, ray.dir);
+        self.intersect_ctx(ray, &ctx, scratch)
+    }
+
+    /// Nearest hits of up to eight rays (`out[k]` for `rays[k]`), the same as
+    /// [`RenderScene::intersect_with`] ray by ray. Eight valid rays from one origin
+    /// (camera rays through neighbouring pixels) go as a packet: the scene's
+    /// nearest-mode meshes are traced once for all eight
+    /// ([`LeafTable::mesh_nearest8`]), then each ray's CSG is evaluated with
+    /// those results.
+    pub fn intersect_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>]) {
+        let n = rays.len().min(out.len());
+        let o = rays[0].origin;
+        let packet = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| r.is_valid() && r.origin == o);
+        if !packet {
+            for k in 0..n {
+                out[k] = self.intersect_with(&rays[k], &mut ps.scratch);
+            }
+            return;
+        }
+        let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(o, rays[k].dir));
+        let d: [Vec3; 8] = std::array::from_fn(|k| rays[k].dir);
+        let tmin: [f32; 8] = std::array::from_fn(|k| rays[k].tmin);
+        let tmax: [f32; 8] = std::array::from_fn(|k| rays[k].tmax);
+        let slack: [f32; 8] = std::array::from_fn(|k| ctx[k].nearest_slack());
+        ps.memo.clear();
+        for &i in &self.packet_meshes {
+            ps.memo.add(i, &tmin, &tmax, |sp| self.leaves.mesh_nearest8(i, o, &d, &tmin, &tmax, &slack, 0xff, sp));
+        }
+        for k in 0..8 {
+            out[k] = self.intersect_ctx(&rays[k], &ctx[k].with_memo(&ps.memo, k), &mut ps.scratch);
+        }
+    }
+
+    fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch) -> Option<Hit> {
+        let ctx = *ctx;
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
         for &oi in &self.unbounded {

@@ -27,6 +27,7 @@
 //! rule). So exactly one of the triangles that tile a neighbourhood of an edge or
 //! vertex reports the crossing: rays never leak through, nor count a crossing twice.
 
+use crate::Span;
 use std::collections::HashMap;
 use std::fmt;
 
@@ -277,9 +278,10 @@ impl OrderedStack {
     /// nearest and pushes the others far first. `Err` when they do not fit (a
     /// degenerate tree deeper than the stack).
     #[inline(always)]
-    fn descend(&mut self, n: &wide::Node4, m: u32, tn: Vec4) -> Result<u32, ()> {
+    fn descend(&mut self, n: &wide::Node4, m: u32, tn: Vec4) -> Result<(u32, f32), ()> {
         if m & (m - 1) == 0 {
-            return Ok(n.child(m.trailing_zeros()));
+            let s = m.trailing_zeros();
+            return Ok((n.child(s), tn[s as usize]));
         }
         // Two to four hits: sort by entry (descending), push all but the nearest.
         let mut e = [(0u32, 0.0f32); 4];
@@ -302,18 +304,18 @@ impl OrderedStack {
         }
         self.items[self.len..self.len + ne - 1].copy_from_slice(&e[..ne - 1]);
         self.len += ne - 1;
-        Ok(e[ne - 1].0)
+        Ok(e[ne - 1])
     }
 
     /// The next pushed child whose entry is not past `limit` (boxes beyond it are
     /// dropped), or `None` when the walk is over.
     #[inline(always)]
-    fn pop_within(&mut self, limit: f32) -> Option<u32> {
+    fn pop_within(&mut self, limit: f32) -> Option<(u32, f32)> {
         while self.len > 0 {
             self.len -= 1;
             let (c, t) = self.items[self.len];
             if t - t.abs() * SLAB_EPS <= limit {
-                return Some(c);
+                return Some((c, t));
             }
         }
         None
@@ -805,7 +807,7 @@ impl MeshData {
                 let (m, tn) = rb.hit(n, tmin, thi);
                 if m != 0 {
                     match stack.descend(n, m, tn) {
-                        Ok(c) => {
+                        Ok((c, _)) => {
                             cur = c;
                             continue;
                         }
@@ -815,7 +817,7 @@ impl MeshData {
                 }
             }
             match stack.pop_within(thi) {
-                Some(c) => cur = c,
+                Some((c, _)) => cur = c,
                 None => return best,
             }
         }
@@ -1169,7 +1171,7 @@ impl MeshData {
                 let (m, tn) = rb.hit(n, tmin, cut);
                 if m != 0 {
                     match stack.descend(n, m, tn) {
-                        Ok(c) => {
+                        Ok((c, _)) => {
                             cur = c;
                             continue;
                         }
@@ -1182,7 +1184,7 @@ impl MeshData {
                 }
             }
             match stack.pop_within(cut) {
-                Some(c) => cur = c,
+                Some((c, _)) => cur = c,
                 None => {
                     // Crossings found before `cut` shrank may lie past it: not all
                     // of their neighbours were seen.
@@ -1192,6 +1194,139 @@ impl MeshData {
                 }
             }
         }
+    }
+
+    /// [`MeshData::spans_nearest`] for eight rays from one origin `o` at once
+    /// (camera rays through neighbouring pixels): the BVH is walked once for the
+    /// packet with interval bounds of the rays' slab parameters
+    /// ([`wide::Frustum8`]), pruned at the largest cut among the rays, and each
+    /// leaf that some ray may still need is tested with that ray alone, within
+    /// its own `[tmin, cut]`. Every crossing a ray's own walk would keep is
+    /// found, so each ray gets the spans and cut that `spans_nearest` gives it.
+    ///
+    /// Rays of `active` go in. Returns the rays done (their spans are pushed to
+    /// `out[k]`, exact on `[tmin[k], cut[k]]`) and the cuts; the others (no
+    /// common octant, a zero direction component, a point at `tmin` inside the
+    /// bounds, the winding rule) are left to the single-ray query.
+    #[allow(clippy::too_many_arguments)]
+    pub fn spans_nearest8(
+        &self,
+        o: Vec3,
+        d: &[Vec3; 8],
+        tmin: &[f32; 8],
+        tmax: &[f32; 8],
+        slack: &[f32; 8],
+        mut active: u32,
+        leaf: u32,
+        out: &mut [Vec<Span>; 8],
+    ) -> (u32, [f32; 8]) {
+        let mut cut = [f32::INFINITY; 8];
+        if self.wide.is_empty() || self.rule != InsideRule::Orientation {
+            return (0, cut);
+        }
+        let pad = (self.bounds.max - self.bounds.min) * 1e-4;
+        for k in 0..8 {
+            let p = o + d[k] * tmin[k];
+            let outside = p.cmplt(self.bounds.min - pad).any() || p.cmpgt(self.bounds.max + pad).any();
+            if !(tmax[k] >= tmin[k]) || !outside || !p.is_finite() {
+                active &= !(1 << k);
+            }
+        }
+        if active == 0 {
+            return (0, cut);
+        }
+        let Some(fr) = wide::Frustum8::new(o, d, active) else { return (0, cut) };
+        let rays: [(WoopRay, wide::TriRay4); 8] = std::array::from_fn(|k| {
+            let r = WoopRay::new(o, d[k]);
+            (r, wide::TriRay4::new(&r))
+        });
+        let mut tlo = f32::INFINITY;
+        for k in 0..8 {
+            if active & (1 << k) != 0 {
+                cut[k] = tmax[k];
+                tlo = tlo.min(tmin[k]);
+            }
+        }
+        let mut xs: [SmallVec<[Crossing; 16]>; 8] = Default::default();
+        // The packet's pruning bound: the largest cut among its rays.
+        let far = |cut: &[f32; 8]| {
+            let mut f = f32::NEG_INFINITY;
+            for k in 0..8 {
+                if active & (1 << k) != 0 {
+                    f = f.max(cut[k]);
+                }
+            }
+            f
+        };
+        let mut thi = far(&cut);
+        let mut stack = OrderedStack::new();
+        let (mut cur, mut entry) = (0u32, tlo);
+        loop {
+            if cur & wide::LEAF != 0 {
+                let blk = self.wide.block(cur);
+                let te = entry - entry.abs() * SLAB_EPS;
+                let mut mm = active;
+                let mut shrunk = false;
+                while mm != 0 {
+                    let k = mm.trailing_zeros() as usize;
+                    mm &= mm - 1;
+                    // `entry` bounds every ray's own entry into this leaf's box from below.
+                    if te > cut[k] {
+                        continue;
+                    }
+                    let (r, r4) = &rays[k];
+                    match blk.test(r4, tmin[k], cut[k]) {
+                        wide::Block::Hits(mut m, t, det) => {
+                            while m != 0 {
+                                let l = m.trailing_zeros();
+                                m &= m - 1;
+                                let t = t[l as usize];
+                                xs[k].push(Crossing { t, slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
+                                cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                                shrunk = true;
+                            }
+                        }
+                        wide::Block::Exact => {
+                            for slot in blk.slots() {
+                                if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
+                                    xs[k].push(Crossing { t, slot, front });
+                                    cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                                    shrunk = true;
+                                }
+                            }
+                        }
+                    }
+                }
+                if shrunk {
+                    thi = far(&cut);
+                }
+            } else {
+                let n = self.wide.node(cur);
+                let (m, tn) = fr.hit(n, tlo, thi);
+                if m != 0 {
+                    match stack.descend(n, m, tn) {
+                        Ok(c) => {
+                            (cur, entry) = c;
+                            continue;
+                        }
+                        // A degenerate tree deeper than the stack: ray by ray.
+                        Err(()) => return (0, [f32::INFINITY; 8]),
+                    }
+                }
+            }
+            match stack.pop_within(thi) {
+                Some((c, t)) => (cur, entry) = (c, t),
+                None => break,
+            }
+        }
+        let mut m = active;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            self.sort_signed(&mut xs[k]);
+            self.walk_signed(&xs[k], 0, tmin[k], cut[k].min(tmax[k]), leaf, &mut out[k]);
+        }
+        (active, cut)
     }
 
     /// The surface id of a crossing that enters (`entering`) or leaves the solid.

@@ -638,3 +638,68 @@ fn mesh_closest_hit8_matches_single_rays() {
         println!("{name}: {bundles} bundles agree");
     }
 }
+
+/// The packet walk of the nearest query gives every ray what its own
+/// `spans_nearest` gives (the same spans and cut, bit for bit), for coherent and
+/// spread bundles, bundles aimed at vertices, per-ray clipped ranges and
+/// slacks, and starts inside the bounds (left to the single-ray query).
+#[test]
+fn mesh_spans_nearest8_matches_single_rays() {
+    let seed = 33u64;
+    println!("seed {seed}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    for (name, (pos, tris)) in [("cube", cube()), ("octasphere(5)", octasphere(5))] {
+        let m = MeshData::new(pos.clone(), tris.clone(), InsideRule::Orientation).unwrap();
+        let (mut packed, mut single) = (0, 0);
+        // Rays of narrow bundles from outside the bounds (what camera packets are).
+        let (mut narrow, mut narrow_packed) = (0, 0);
+        for i in 0..3000 {
+            let o = if i % 11 == 0 {
+                // Inside the bounds: those rays go one by one.
+                Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5))
+            } else {
+                random_dir(&mut rng).normalize() * rng.gen_range(1.5..3.0)
+            };
+            let spread = if i % 3 == 0 { 1.0 } else { 0.02 };
+            let base = if i % 5 == 0 {
+                pos[rng.gen_range(0..pos.len())] - o
+            } else {
+                -o + Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5))
+            };
+            let d: [Vec3; 8] = std::array::from_fn(|k| {
+                if k == 0 || i % 5 == 0 && k == 4 {
+                    base
+                } else {
+                    base + Vec3::new(rng.gen_range(-spread..spread), rng.gen_range(-spread..spread), rng.gen_range(-spread..spread))
+                }
+            });
+            let tmin: [f32; 8] = std::array::from_fn(|k| if k == 3 { 0.5 } else { 0.0 });
+            let tmax: [f32; 8] = std::array::from_fn(|k| if k == 5 { 0.9 } else if k == 6 { -1.0 } else { 10.0 });
+            let slack: [f32; 8] = std::array::from_fn(|k| if k == 2 { 0.0 } else { 1e-4 * k as f32 });
+            let active = if i % 13 == 0 { 0b1011_0110 } else { 0xff };
+            let mut out: [Vec<Span>; 8] = Default::default();
+            let (done, cut) = m.spans_nearest8(o, &d, &tmin, &tmax, &slack, active, 7, &mut out);
+            assert_eq!(done & !active, 0, "{name}: bundle {i}: a ray outside the active set was traced");
+            let is_narrow = i % 3 != 0 && i % 11 != 0 && active == 0xff;
+            for k in 0..8 {
+                if is_narrow && tmax[k] >= tmin[k] {
+                    narrow += 1;
+                    narrow_packed += (done >> k) & 1;
+                }
+                if done & (1 << k) == 0 {
+                    assert!(out[k].is_empty());
+                    single += 1;
+                    continue;
+                }
+                packed += 1;
+                let mut one: Vec<Span> = Vec::new();
+                let v = m.spans_nearest(o, d[k], tmin[k], tmax[k], slack[k], 7, &mut one);
+                assert_eq!(v, cut[k], "{name}: bundle {i} ray {k}: cut; o {o:?} d {:?}", d[k]);
+                let ts = |s: &[Span]| s.iter().map(|s| (s.t0, s.t1, s.s0, s.s1)).collect::<Vec<_>>();
+                assert_eq!(ts(&out[k]), ts(&one), "{name}: bundle {i} ray {k}: spans; o {o:?} d {:?}", d[k]);
+            }
+        }
+        println!("{name}: {packed} rays traced in packets, {single} left to the single-ray query; narrow bundles: {narrow_packed} of {narrow} rays packed");
+        assert!(narrow_packed * 10 > narrow * 8, "{name}: narrow bundles should go as packets");
+    }
+}

@@ -351,3 +351,72 @@ impl Packet8 {
         })
     }
 }
+
+/// Eight rays from one origin whose directions share an octant, as an interval
+/// packet for the nearest-crossing walk: per axis, the smallest and largest
+/// inverse direction component. Rounding is monotone, so each ray's own slab
+/// parameter `(plane - o) * inv` lies between the two products with the bounds,
+/// and one 4-wide test per node (about the cost of one ray's) is conservative
+/// for every ray of the packet.
+pub(super) struct Frustum8 {
+    o: [Vec4; 3],
+    inv_lo: [Vec4; 3],
+    inv_hi: [Vec4; 3],
+    near: [usize; 3],
+}
+
+impl Frustum8 {
+    /// `None` when the rays of `active` do not share an octant or some direction
+    /// component is zero.
+    #[inline(always)]
+    pub(super) fn new(o: Vec3, d: &[Vec3; 8], active: u32) -> Option<Frustum8> {
+        let mut lo = Vec3::INFINITY;
+        let mut hi = Vec3::NEG_INFINITY;
+        let mut neg = [0u32; 3];
+        let mut pos = [0u32; 3];
+        for (k, dk) in d.iter().enumerate() {
+            if active & (1 << k) == 0 {
+                continue;
+            }
+            let inv = dk.recip();
+            lo = lo.min(inv);
+            hi = hi.max(inv);
+            for a in 0..3 {
+                neg[a] += (dk[a] < 0.0) as u32;
+                pos[a] += (dk[a] > 0.0) as u32;
+            }
+        }
+        let n = active.count_ones();
+        let mut near = [0usize; 3];
+        for a in 0..3 {
+            if neg[a] + pos[a] != n || (neg[a] != 0 && pos[a] != 0) || !lo[a].is_finite() || !hi[a].is_finite() {
+                return None;
+            }
+            near[a] = (neg[a] == n) as usize;
+        }
+        Some(Frustum8 {
+            o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            inv_lo: [Vec4::splat(lo.x), Vec4::splat(lo.y), Vec4::splat(lo.z)],
+            inv_hi: [Vec4::splat(hi.x), Vec4::splat(hi.y), Vec4::splat(hi.z)],
+            near,
+        })
+    }
+
+    /// The children some ray of the packet may meet within `[tlo, thi]` (the
+    /// smallest start and largest end over the rays), with a lower bound of
+    /// every ray's entry parameter per child.
+    #[inline(always)]
+    pub(super) fn hit(&self, n: &Node4, tlo: f32, thi: f32) -> (u32, Vec4) {
+        let mut lo = Vec4::splat(tlo);
+        let mut hi = Vec4::splat(thi);
+        for a in 0..3 {
+            let dn = Vec4::from_array(n.b[2 * a + self.near[a]]) - self.o[a];
+            let df = Vec4::from_array(n.b[2 * a + 1 - self.near[a]]) - self.o[a];
+            lo = lo.max((dn * self.inv_lo[a]).min(dn * self.inv_hi[a]));
+            hi = hi.min((df * self.inv_lo[a]).max(df * self.inv_hi[a]));
+        }
+        let eps = Vec4::splat(SLAB_EPS);
+        let m = (lo - lo.abs() * eps).cmple(hi + hi.abs() * eps);
+        (m.bitmask(), lo)
+    }
+}

@@ -526,6 +526,37 @@ impl LeafTable {
         mesh.spans_nearest(m.transform_point3(o), m.transform_vector3(d), tmin, tmax, slack, i, out)
     }
 
+    /// Is leaf `i` a triangle mesh?
+    pub fn is_mesh(&self, i: u32) -> bool {
+        self.kind[i as usize] == LeafKind::Mesh
+    }
+
+    /// The nearest-mode query of mesh leaf `i` ([`LeafTable::spans_for`] with
+    /// `nearest = Some(slack[k])`) for eight world rays from one origin `o`, traced
+    /// as one packet ([`MeshData::spans_nearest8`]). Returns the rays done (their
+    /// spans in `out[k]`, exact on `[tmin[k], valid[k]]`) and the `valid` ends;
+    /// the others are left to `spans_for`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn mesh_nearest8(
+        &self,
+        i: u32,
+        o: Vec3,
+        d: &[Vec3; 8],
+        tmin: &[f32; 8],
+        tmax: &[f32; 8],
+        slack: &[f32; 8],
+        active: u32,
+        out: &mut [Vec<Span>; 8],
+    ) -> (u32, [f32; 8]) {
+        let iu = i as usize;
+        if self.kind[iu] != LeafKind::Mesh {
+            return (0, [f32::INFINITY; 8]);
+        }
+        let m = &self.to_local[iu];
+        let dl: [Vec3; 8] = std::array::from_fn(|k| m.transform_vector3(d[k]));
+        self.meshes[self.ext[iu] as usize].spans_nearest8(m.transform_point3(o), &dl, tmin, tmax, slack, active, i, out)
+    }
+
     /// Is the world point inside leaf `i` (boundary included)?
     pub fn contains(&self, i: u32, p: Vec3) -> bool {
         let iu = i as usize;
