@@ -5,7 +5,6 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use glam::Vec3;
 use rayon::prelude::*;
 use rothray_csg::Scratch;
-use smallvec::SmallVec;
 
 use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
 
@@ -281,24 +280,30 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                 // Blocks of 4x2 pixels: their camera rays go as one packet.
                 for r0 in (0..rows_here).step_by(2) {
                     for bx in (x0..x1).step_by(4) {
-                        let px: SmallVec<[(usize, usize); 8]> =
-                            (r0..(r0 + 2).min(rows_here)).flat_map(|r| (bx..(bx + 4).min(x1)).map(move |x| (r, x))).collect();
+                        let (bw, bh) = ((x1 - bx).min(4), (rows_here - r0).min(2));
+                        let np = bw * bh;
+                        let px: [(usize, usize); 8] = std::array::from_fn(|k| (r0 + k / 4, bx + k % 4));
+                        let px = if np == 8 {
+                            px
+                        } else {
+                            std::array::from_fn(|k| if k < np { (r0 + k / bw, bx + k % bw) } else { (0, 0) })
+                        };
+                        let px = &px[..np];
                         let mut acc = [Vec3::ZERO; 8];
                         let mut dmin = [f32::INFINITY; 8];
+                        let mut rs = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
                         for si in 0..spp {
-                            let rs: SmallVec<[Ray; 8]> = px
-                                .iter()
-                                .map(|&(r, x)| {
-                                    let y = y0 + r;
-                                    let (jx, jy) = if spp == 1 {
-                                        (0.5, 0.5)
-                                    } else {
-                                        let rr = hash2((y * w + x) as u32, si);
-                                        ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
-                                    };
-                                    rays.ray(x as f32 + jx, y as f32 + jy)
-                                })
-                                .collect();
+                            for (k, &(r, x)) in px.iter().enumerate() {
+                                let y = y0 + r;
+                                let (jx, jy) = if spp == 1 {
+                                    (0.5, 0.5)
+                                } else {
+                                    let rr = hash2((y * w + x) as u32, si);
+                                    ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
+                                };
+                                rs[k] = rays.ray(x as f32 + jx, y as f32 + jy);
+                            }
+                            let rs = &rs[..np];
                             let mut hits = [None; 8];
                             scene.intersect_packet(&rs, ps, &mut hits);
                             for k in 0..rs.len() {

@@ -147,9 +147,19 @@ impl FlatBvh {
             });
             return;
         }
-        let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
         let root = &self.nodes[0];
         let Some((t0, _)) = Aabb::new(root.min, root.max).ray_range(o, inv_d, tmin, tmax) else { return };
+        if root.count > 0 {
+            // One leaf (a scene of one object, a small node): no stack.
+            for k in root.first..root.first + root.count {
+                tmax = f(self.prims[k as usize], t0);
+                if tmax < tmin {
+                    return;
+                }
+            }
+            return;
+        }
+        let mut stack: SmallVec<[(u32, f32); 64]> = SmallVec::new();
         stack.push((0, t0));
         while let Some((ni, tenter)) = stack.pop() {
             if tenter > tmax {

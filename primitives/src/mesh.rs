@@ -1224,11 +1224,8 @@ impl MeshData {
         if self.wide.is_empty() || self.rule != InsideRule::Orientation {
             return (0, cut);
         }
-        let pad = (self.bounds.max - self.bounds.min) * 1e-4;
         for k in 0..8 {
-            let p = o + d[k] * tmin[k];
-            let outside = p.cmplt(self.bounds.min - pad).any() || p.cmpgt(self.bounds.max + pad).any();
-            if !(tmax[k] >= tmin[k]) || !outside || !p.is_finite() {
+            if !(tmax[k] >= tmin[k]) {
                 active &= !(1 << k);
             }
         }
@@ -1236,10 +1233,6 @@ impl MeshData {
             return (0, cut);
         }
         let Some(fr) = wide::Frustum8::new(o, d, active) else { return (0, cut) };
-        let rays: [(WoopRay, wide::TriRay4); 8] = std::array::from_fn(|k| {
-            let r = WoopRay::new(o, d[k]);
-            (r, wide::TriRay4::new(&r))
-        });
         let mut tlo = f32::INFINITY;
         for k in 0..8 {
             if active & (1 << k) != 0 {
@@ -1247,9 +1240,36 @@ impl MeshData {
                 tlo = tlo.min(tmin[k]);
             }
         }
+        let mut thi = f32::NEG_INFINITY;
+        for k in 0..8 {
+            if active & (1 << k) != 0 {
+                thi = thi.max(cut[k]);
+            }
+        }
+        // Most packets of a frame miss the mesh: no ray meets any box of the root
+        // within its range, so every ray's answer is exact and empty.
+        let (root_mask, root_t) = fr.hit(self.wide.node(0), tlo, thi);
+        if root_mask == 0 {
+            return (active, cut);
+        }
+        let pad = (self.bounds.max - self.bounds.min) * 1e-4;
+        for k in 0..8 {
+            let p = o + d[k] * tmin[k];
+            let outside = p.cmplt(self.bounds.min - pad).any() || p.cmpgt(self.bounds.max + pad).any();
+            if !outside || !p.is_finite() {
+                active &= !(1 << k);
+                cut[k] = f32::INFINITY;
+            }
+        }
+        if active == 0 {
+            return (0, cut);
+        }
+        // Per-ray constants of the triangle test, made when a ray first reaches a leaf.
+        let mut rays: [std::mem::MaybeUninit<(WoopRay, wide::TriRay4)>; 8] = [const { std::mem::MaybeUninit::uninit() }; 8];
+        let mut ready = 0u32;
         let mut xs: [SmallVec<[Crossing; 16]>; 8] = Default::default();
         // The packet's pruning bound: the largest cut among its rays.
-        let far = |cut: &[f32; 8]| {
+        let far = |cut: &[f32; 8], active: u32| {
             let mut f = f32::NEG_INFINITY;
             for k in 0..8 {
                 if active & (1 << k) != 0 {
@@ -1258,9 +1278,12 @@ impl MeshData {
             }
             f
         };
-        let mut thi = far(&cut);
         let mut stack = OrderedStack::new();
-        let (mut cur, mut entry) = (0u32, tlo);
+        // The root's children were tested above.
+        let (mut cur, mut entry) = match stack.descend(self.wide.node(0), root_mask, root_t) {
+            Ok(c) => c,
+            Err(()) => return (0, [f32::INFINITY; 8]),
+        };
         loop {
             if cur & wide::LEAF != 0 {
                 let blk = self.wide.block(cur);
@@ -1274,7 +1297,13 @@ impl MeshData {
                     if te > cut[k] {
                         continue;
                     }
-                    let (r, r4) = &rays[k];
+                    if ready & (1 << k) == 0 {
+                        let r = WoopRay::new(o, d[k]);
+                        rays[k].write((r, wide::TriRay4::new(&r)));
+                        ready |= 1 << k;
+                    }
+                    // SAFETY: lane k was written just above or on an earlier leaf.
+                    let (r, r4) = unsafe { rays[k].assume_init_ref() };
                     match blk.test(r4, tmin[k], cut[k]) {
                         wide::Block::Hits(mut m, t, det) => {
                             while m != 0 {
@@ -1298,7 +1327,7 @@ impl MeshData {
                     }
                 }
                 if shrunk {
-                    thi = far(&cut);
+                    thi = far(&cut, active);
                 }
             } else {
                 let n = self.wide.node(cur);
