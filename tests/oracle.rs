@@ -215,11 +215,16 @@ pub fn octa_mesh(c: DVec3, r: f64, levels: u32) -> Shape {
 }
 
 /// Deletes the mesh files [`octa_mesh`] wrote in this process.
-pub fn remove_octa_meshes() {
-    let prefix = format!("rothray-oracle-{}-", std::process::id());
-    for e in std::fs::read_dir(std::env::temp_dir()).into_iter().flatten().flatten() {
-        if e.file_name().to_string_lossy().starts_with(&prefix) {
-            let _ = std::fs::remove_file(e.path());
+pub fn remove_mesh_files(shapes: &[Shape]) {
+    // Only these shapes' own files: tests run in parallel threads of one process,
+    // so removing every file of the process could pull one from under a test that
+    // has not baked it yet.
+    for s in shapes {
+        let json = s.json();
+        for part in json.split("\"path\":").skip(1) {
+            if let Some(path) = part.strip_prefix('"').and_then(|r| r.split('"').next()) {
+                let _ = std::fs::remove_file(path);
+            }
         }
     }
 }
