@@ -586,6 +586,9 @@ impl RenderScene {
     /// those results.
     pub fn intersect_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>]) {
         let n = rays.len().min(out.len());
+        if n == 0 {
+            return;
+        }
         let o = rays[0].origin;
         let packet = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| r.is_valid() && r.origin == o);
         if !packet {
