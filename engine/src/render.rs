@@ -305,7 +305,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                             }
                             let rs = &rs[..np];
                             let mut hits = [None; 8];
-                            scene.intersect_packet(&rs, ps, &mut hits);
+                            scene.intersect_packet(rs, ps, &mut hits);
                             for k in 0..rs.len() {
                                 let smp = shade(scene, s, &rs[k], hits[k], &mut ps.scratch, &mut shadows);
                                 acc[k] += smp.rgb;

@@ -1240,12 +1240,11 @@ impl MeshData {
                 tlo = tlo.min(tmin[k]);
             }
         }
-        let mut thi = f32::NEG_INFINITY;
-        for k in 0..8 {
-            if active & (1 << k) != 0 {
-                thi = thi.max(cut[k]);
-            }
-        }
+        // The packet's pruning bound: the largest cut among its rays.
+        let far = |cut: &[f32; 8], active: u32| {
+            cut.iter().enumerate().filter(|(k, _)| active & (1 << k) != 0).fold(f32::NEG_INFINITY, |f, (_, &c)| f.max(c))
+        };
+        let mut thi = far(&cut, active);
         // Most packets of a frame miss the mesh: no ray meets any box of the root
         // within its range, so every ray's answer is exact and empty.
         let (root_mask, root_t) = fr.hit(self.wide.node(0), tlo, thi);
@@ -1268,16 +1267,6 @@ impl MeshData {
         let mut rays: [std::mem::MaybeUninit<(WoopRay, wide::TriRay4)>; 8] = [const { std::mem::MaybeUninit::uninit() }; 8];
         let mut ready = 0u32;
         let mut xs: [SmallVec<[Crossing; 16]>; 8] = Default::default();
-        // The packet's pruning bound: the largest cut among its rays.
-        let far = |cut: &[f32; 8], active: u32| {
-            let mut f = f32::NEG_INFINITY;
-            for k in 0..8 {
-                if active & (1 << k) != 0 {
-                    f = f.max(cut[k]);
-                }
-            }
-            f
-        };
         let mut stack = OrderedStack::new();
         // The root's children were tested above.
         let (mut cur, mut entry) = match stack.descend(self.wide.node(0), root_mask, root_t) {
