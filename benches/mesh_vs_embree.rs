@@ -13,6 +13,8 @@
 //! Environment: RB_THREADS (2), RB_REPEATS (7), RB_SUBDIV (4), RB_DIR
 //! (target/embree-bench), RB_EMBREE (RB_DIR/embree_bench), RB_RANDOM (1000000),
 //! RB_METHODS (comma-separated name prefixes of the rothray methods to run; all).
+//! `sse2_closest_hit8` is the packet walk with the SSE2 node test that CPUs
+//! without AVX run (`closest_hit8` picks AVX at run time where the CPU has it).
 //! `binary (old)` is the scalar binary-BVH walk `closest_hit` used before the 4-wide tree.
 
 use std::collections::HashMap;
@@ -177,6 +179,18 @@ fn trace_pairs(m: &MeshData, rays: &[Ray], out: &mut [f32]) {
 }
 
 fn trace8(m: &MeshData, rays: &[Ray], out: &mut [f32]) {
+    trace8_with(m, rays, out, MeshData::closest_hit8)
+}
+
+/// The packet walk with the baseline SSE2 node test (what a CPU without AVX runs).
+fn trace8_sse(m: &MeshData, rays: &[Ray], out: &mut [f32]) {
+    trace8_with(m, rays, out, MeshData::closest_hit8_sse)
+}
+
+type Hit8 = [Option<(f32, u32)>; 8];
+
+#[inline(always)]
+fn trace8_with(m: &MeshData, rays: &[Ray], out: &mut [f32], f: impl Fn(&MeshData, &[Vec3; 8], &[Vec3; 8], &[f32; 8], &[f32; 8]) -> Hit8) {
     for (rs, ts) in rays.chunks(8).zip(out.chunks_mut(8)) {
         if rs.len() < 8 {
             trace1(m, rs, ts);
@@ -186,7 +200,7 @@ fn trace8(m: &MeshData, rays: &[Ray], out: &mut [f32]) {
         let d: [Vec3; 8] = std::array::from_fn(|k| rs[k].d);
         let tmin: [f32; 8] = std::array::from_fn(|k| rs[k].tmin);
         let tmax: [f32; 8] = std::array::from_fn(|k| rs[k].tmax);
-        let h = m.closest_hit8(&o, &d, &tmin, &tmax);
+        let h = f(m, &o, &d, &tmin, &tmax);
         for k in 0..8 {
             ts[k] = h[k].map_or(f32::INFINITY, |h| h.0);
         }
@@ -300,7 +314,7 @@ fn main() {
             } else {
                 println!("(no Embree program at {}; run benches/embree/run.sh)", embree.display());
             }
-            let methods = [("closest_hit", trace1 as Tracer), ("closest_hit8", trace8 as Tracer), ("binary (old)", trace_pairs as Tracer)];
+            let methods = [("closest_hit", trace1 as Tracer), ("closest_hit8", trace8 as Tracer), ("sse2_closest_hit8", trace8_sse as Tracer), ("binary (old)", trace_pairs as Tracer)];
             let only: String = env("RB_METHODS", String::new());
             for (name, f) in methods {
                 if !only.is_empty() && !only.split(',').any(|x| name.starts_with(x)) {

@@ -30,6 +30,7 @@
 use crate::Span;
 use std::collections::HashMap;
 use std::fmt;
+use std::mem::MaybeUninit;
 
 use glam::{DVec3, Vec3, Vec4};
 use smallvec::SmallVec;
@@ -901,6 +902,32 @@ impl MeshData {
     /// all eight rays; leaves test each ray that reached them. Otherwise (or
     /// when a direction component is zero) the rays go one by one.
     pub fn closest_hit8(&self, o: &[Vec3; 8], d: &[Vec3; 8], tmin: &[f32; 8], tmax: &[f32; 8]) -> [Option<(f32, u32)>; 8] {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the CPU has AVX.
+            return unsafe { self.closest_hit8_avx(o, d, tmin, tmax) };
+        }
+        self.closest_hit8_in::<false>(o, d, tmin, tmax)
+    }
+
+    /// [`closest_hit8`](Self::closest_hit8) without the AVX node test (the
+    /// baseline SSE2 path, which machines without AVX take), for tests and
+    /// benchmarks: both give the same answers.
+    #[doc(hidden)]
+    pub fn closest_hit8_sse(&self, o: &[Vec3; 8], d: &[Vec3; 8], tmin: &[f32; 8], tmax: &[f32; 8]) -> [Option<(f32, u32)>; 8] {
+        self.closest_hit8_in::<false>(o, d, tmin, tmax)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn closest_hit8_avx(&self, o: &[Vec3; 8], d: &[Vec3; 8], tmin: &[f32; 8], tmax: &[f32; 8]) -> [Option<(f32, u32)>; 8] {
+        self.closest_hit8_in::<true>(o, d, tmin, tmax)
+    }
+
+    /// The packet walk; `AVX` (only instantiated inside a function compiled
+    /// with AVX) tests the nodes with 8-lane ops.
+    #[inline(always)]
+    fn closest_hit8_in<const AVX: bool>(&self, o: &[Vec3; 8], d: &[Vec3; 8], tmin: &[f32; 8], tmax: &[f32; 8]) -> [Option<(f32, u32)>; 8] {
         let mut best = [None; 8];
         if self.wide.is_empty() {
             return best;
@@ -908,20 +935,20 @@ impl MeshData {
         let Some(p) = wide::Packet8::new(o, d) else {
             return std::array::from_fn(|k| self.closest_hit(o[k], d[k], tmin[k], tmax[k]));
         };
-        let rays: [(WoopRay, wide::TriRay4); 8] = std::array::from_fn(|k| {
-            let r = WoopRay::new(o[k], d[k]);
-            (r, wide::TriRay4::new(&r))
-        });
-        let tlo4 = [Vec4::from_slice(&tmin[..4]), Vec4::from_slice(&tmin[4..])];
-        let mut thi = *tmax;
+        let tlo = wide::F8(*tmin);
+        let mut thi = wide::F8(*tmax);
         let mut active = 0u32;
         for k in 0..8 {
             if tmax[k] >= tmin[k] {
                 active |= 1 << k;
             }
         }
+        // Each ray's triangle-test constants, set up when it first reaches a leaf
+        // (most camera rays miss the mesh and never do).
+        let mut rays: [MaybeUninit<(WoopRay, wide::TriRay4)>; 8] = [const { MaybeUninit::uninit() }; 8];
+        let mut ready = 0u32;
         // (child code, rays that reached it, their smallest entry parameter)
-        let mut stack = [(0u32, 0u32, 0.0f32); STACK];
+        let mut stack = [MaybeUninit::<(u32, u32, f32)>::uninit(); STACK];
         let mut sp = 0usize;
         let (mut cur, mut mask) = (0u32, active);
         loop {
@@ -931,24 +958,31 @@ impl MeshData {
                 while mm != 0 {
                     let k = mm.trailing_zeros() as usize;
                     mm &= mm - 1;
-                    let (r, r4) = &rays[k];
-                    match blk.test(r4, tmin[k], thi[k]) {
+                    if ready & (1 << k) == 0 {
+                        let r = WoopRay::new(o[k], d[k]);
+                        rays[k].write((r, wide::TriRay4::new(&r)));
+                        ready |= 1 << k;
+                    }
+                    // SAFETY: written above (bit k of `ready`).
+                    let (r, r4) = unsafe { rays[k].assume_init_ref() };
+                    let thi_k = &mut thi.0[k];
+                    match blk.test(r4, tmin[k], *thi_k) {
                         wide::Block::Hits(mut m, t, _) => {
                             while m != 0 {
                                 let l = m.trailing_zeros();
                                 m &= m - 1;
                                 let tl = t[l as usize];
-                                if tl <= thi[k] {
-                                    thi[k] = tl;
+                                if tl <= *thi_k {
+                                    *thi_k = tl;
                                     best[k] = Some((tl, blk.slots().start + l));
                                 }
                             }
                         }
                         wide::Block::Exact => {
                             for slot in blk.slots() {
-                                if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], thi[k]) {
+                                if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], *thi_k) {
                                     best[k] = Some((t, slot));
-                                    thi[k] = t;
+                                    *thi_k = t;
                                 }
                             }
                         }
@@ -956,8 +990,11 @@ impl MeshData {
                 }
             } else {
                 let n = self.wide.node(cur);
-                let thi4 = [Vec4::from_slice(&thi[..4]), Vec4::from_slice(&thi[4..])];
-                let h = p.hit(n, &tlo4, &thi4);
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: AVX is only true in `closest_hit8_avx`, compiled with AVX.
+                let h = if AVX { unsafe { p.hit_avx(n, &tlo, &thi) } } else { p.hit(n, &tlo, &thi) };
+                #[cfg(not(target_arch = "x86_64"))]
+                let h = p.hit(n, &tlo, &thi);
                 let mut e = [(0u32, 0u32, 0.0f32); 4];
                 let mut ne = 0;
                 for (s, &(m, t)) in h.iter().enumerate() {
@@ -979,7 +1016,9 @@ impl MeshData {
                         // A degenerate tree deeper than the stack: ray by ray.
                         return std::array::from_fn(|k| self.closest_hit(o[k], d[k], tmin[k], tmax[k]));
                     }
-                    stack[sp..sp + ne - 1].copy_from_slice(&e[..ne - 1]);
+                    for (slot, item) in stack[sp..sp + ne - 1].iter_mut().zip(&e[..ne - 1]) {
+                        slot.write(*item);
+                    }
                     sp += ne - 1;
                     (cur, mask) = (e[ne - 1].0, e[ne - 1].1);
                     continue;
@@ -990,7 +1029,8 @@ impl MeshData {
                     return best;
                 }
                 sp -= 1;
-                let (c, m, t) = stack[sp];
+                // SAFETY: slots below `sp` were written when pushed.
+                let (c, m, t) = unsafe { stack[sp].assume_init() };
                 // `t` is at most each ray's own entry: rays whose best hit is nearer drop out.
                 let mut m2 = 0;
                 let tt = t - t.abs() * SLAB_EPS;
@@ -998,7 +1038,7 @@ impl MeshData {
                 while mm != 0 {
                     let k = mm.trailing_zeros();
                     mm &= mm - 1;
-                    if tt <= thi[k as usize] {
+                    if tt <= thi.0[k as usize] {
                         m2 |= 1 << k;
                     }
                 }

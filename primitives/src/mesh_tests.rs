@@ -595,9 +595,12 @@ fn mesh_bvh_stats() {
 
 /// The 4-wide walk, the 8-ray packet walk and the old binary walk find the same
 /// nearest crossing (coherent bundles, mixed-octant bundles, axis-aligned rays
-/// with zero direction components, rays aimed at vertices, clipped ranges).
+/// with zero direction components, rays aimed at vertices, clipped ranges), on
+/// both node tests of the packet walk (SSE2 and, where the CPU has it, AVX).
 #[test]
 fn mesh_closest_hit8_matches_single_rays() {
+    #[cfg(target_arch = "x86_64")]
+    println!("AVX: {}", std::arch::is_x86_feature_detected!("avx"));
     let seed = 21u64;
     println!("seed {seed}");
     let mut rng = SmallRng::seed_from_u64(seed);
@@ -627,6 +630,8 @@ fn mesh_closest_hit8_matches_single_rays() {
             let tmin: [f32; 8] = std::array::from_fn(|k| if k == 3 { 0.5 } else { 0.0 });
             let tmax: [f32; 8] = std::array::from_fn(|k| if k == 5 { 0.9 } else if k == 6 { -1.0 } else { 10.0 });
             let h8 = m.closest_hit8(&os, &d, &tmin, &tmax);
+            // The SSE2 node test (machines without AVX) and the AVX one agree exactly.
+            assert_eq!(m.closest_hit8_sse(&os, &d, &tmin, &tmax), h8, "{name}: bundle {i}: SSE2 and dispatched packet walks differ");
             for k in 0..8 {
                 let h1 = m.closest_hit(os[k], d[k], tmin[k], tmax[k]);
                 assert_eq!(h8[k].map(|h| h.0), h1.map(|h| h.0), "{name}: bundle {i} ray {k}: o {:?} d {:?}", os[k], d[k]);

@@ -288,11 +288,25 @@ impl TriBlock {
     }
 }
 
-/// Eight rays sharing a direction octant, SoA in two halves of four lanes, for
-/// the packet walk: each child box is tested against all eight rays at once.
+/// Eight lanes, aligned for one 256-bit load (or two 128-bit ones).
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+pub(super) struct F8(pub(super) [f32; 8]);
+
+impl F8 {
+    #[inline(always)]
+    fn half(&self, h: usize) -> Vec4 {
+        Vec4::from_slice(&self.0[4 * h..4 * h + 4])
+    }
+}
+
+/// Eight rays sharing a direction octant, SoA, for the packet walk: each child
+/// box is tested against all eight rays at once (two 4-lane halves, or one
+/// 8-lane AVX op per step with [`hit_avx`](Self::hit_avx); the arithmetic of a
+/// lane is the same in both).
 pub(super) struct Packet8 {
-    o: [[Vec4; 2]; 3],
-    inv: [[Vec4; 2]; 3],
+    o: [F8; 3],
+    inv: [F8; 3],
     near: [usize; 3],
 }
 
@@ -303,22 +317,20 @@ impl Packet8 {
     pub(super) fn new(o: &[Vec3; 8], d: &[Vec3; 8]) -> Option<Packet8> {
         let mut near = [0usize; 3];
         for a in 0..3 {
-            let neg = d.iter().filter(|v| v[a] < 0.0).count();
-            let pos = d.iter().filter(|v| v[a] > 0.0).count();
+            let mut neg = 0;
+            let mut pos = 0;
+            for v in d {
+                neg += (v[a] < 0.0) as u32;
+                pos += (v[a] > 0.0) as u32;
+            }
             if neg + pos != 8 || (neg != 0 && pos != 0) {
                 return None;
             }
             near[a] = (neg == 8) as usize;
         }
-        let ox = [Vec4::new(o[0].x, o[1].x, o[2].x, o[3].x), Vec4::new(o[4].x, o[5].x, o[6].x, o[7].x)];
-        let oy = [Vec4::new(o[0].y, o[1].y, o[2].y, o[3].y), Vec4::new(o[4].y, o[5].y, o[6].y, o[7].y)];
-        let oz = [Vec4::new(o[0].z, o[1].z, o[2].z, o[3].z), Vec4::new(o[4].z, o[5].z, o[6].z, o[7].z)];
-        let dx = [Vec4::new(d[0].x, d[1].x, d[2].x, d[3].x), Vec4::new(d[4].x, d[5].x, d[6].x, d[7].x)];
-        let dy = [Vec4::new(d[0].y, d[1].y, d[2].y, d[3].y), Vec4::new(d[4].y, d[5].y, d[6].y, d[7].y)];
-        let dz = [Vec4::new(d[0].z, d[1].z, d[2].z, d[3].z), Vec4::new(d[4].z, d[5].z, d[6].z, d[7].z)];
         Some(Packet8 {
-            o: [ox, oy, oz],
-            inv: [dx.map(Vec4::recip), dy.map(Vec4::recip), dz.map(Vec4::recip)],
+            o: std::array::from_fn(|a| F8(std::array::from_fn(|k| o[k][a]))),
+            inv: std::array::from_fn(|a| F8(std::array::from_fn(|k| 1.0 / d[k][a]))),
             near,
         })
     }
@@ -326,19 +338,19 @@ impl Packet8 {
     /// Per child: the rays (bit k = ray k) whose `[tlo, thi]` meets its box, and
     /// the smallest entry parameter among them.
     #[inline(always)]
-    pub(super) fn hit(&self, n: &Node4, tlo: &[Vec4; 2], thi: &[Vec4; 2]) -> [(u32, f32); 4] {
+    pub(super) fn hit(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
         let eps = Vec4::splat(SLAB_EPS);
         std::array::from_fn(|s| {
             let mut mask = 0u32;
             let mut tmin = f32::INFINITY;
             for h in 0..2 {
-                let mut lo = tlo[h];
-                let mut hi = thi[h];
+                let mut lo = tlo.half(h);
+                let mut hi = thi.half(h);
                 for a in 0..3 {
                     let near = Vec4::splat(n.b[2 * a + self.near[a]][s]);
                     let far = Vec4::splat(n.b[2 * a + 1 - self.near[a]][s]);
-                    lo = lo.max((near - self.o[a][h]) * self.inv[a][h]);
-                    hi = hi.min((far - self.o[a][h]) * self.inv[a][h]);
+                    lo = lo.max((near - self.o[a].half(h)) * self.inv[a].half(h));
+                    hi = hi.min((far - self.o[a].half(h)) * self.inv[a].half(h));
                 }
                 let m = (lo - lo.abs() * eps).cmple(hi + hi.abs() * eps);
                 let bm = m.bitmask();
@@ -348,6 +360,46 @@ impl Packet8 {
                 }
             }
             (mask, tmin)
+        })
+    }
+
+    /// [`hit`](Self::hit) with 8-lane AVX ops: the same operations in the same
+    /// order per lane (max/min keep their operand order, so NaN lanes behave
+    /// alike), hence the same masks and entry parameters.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(super) fn hit_avx(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
+        use std::arch::x86_64::*;
+        // SAFETY (loads): F8 is 32-byte aligned and 8 lanes long.
+        let ld = |v: &F8| unsafe { _mm256_load_ps(v.0.as_ptr()) };
+        let eps = _mm256_set1_ps(SLAB_EPS);
+        let sign = _mm256_set1_ps(-0.0);
+        let (tlo, thi) = (ld(tlo), ld(thi));
+        let o = [ld(&self.o[0]), ld(&self.o[1]), ld(&self.o[2])];
+        let inv = [ld(&self.inv[0]), ld(&self.inv[1]), ld(&self.inv[2])];
+        std::array::from_fn(|s| {
+            let mut lo = tlo;
+            let mut hi = thi;
+            for a in 0..3 {
+                let near = _mm256_set1_ps(n.b[2 * a + self.near[a]][s]);
+                let far = _mm256_set1_ps(n.b[2 * a + 1 - self.near[a]][s]);
+                lo = _mm256_max_ps(lo, _mm256_mul_ps(_mm256_sub_ps(near, o[a]), inv[a]));
+                hi = _mm256_min_ps(hi, _mm256_mul_ps(_mm256_sub_ps(far, o[a]), inv[a]));
+            }
+            let l = _mm256_sub_ps(lo, _mm256_mul_ps(_mm256_andnot_ps(sign, lo), eps));
+            let h = _mm256_add_ps(hi, _mm256_mul_ps(_mm256_andnot_ps(sign, hi), eps));
+            let m = _mm256_cmp_ps::<_CMP_LE_OQ>(l, h);
+            let mask = _mm256_movemask_ps(m) as u32;
+            if mask == 0 {
+                return (0, f32::INFINITY);
+            }
+            // Smallest entry among the lanes hit (the others become +inf).
+            let v = _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), lo, m);
+            let v = _mm_min_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v));
+            let v = _mm_min_ps(v, _mm_movehl_ps(v, v));
+            let v = _mm_min_ss(v, _mm_shuffle_ps::<1>(v, v));
+            (mask, _mm_cvtss_f32(v))
         })
     }
 }
