@@ -782,27 +782,7 @@ impl MeshData {
         loop {
             if cur & wide::LEAF != 0 {
                 let blk = self.wide.block(cur);
-                match blk.test(&r4, tmin, thi) {
-                    wide::Block::Hits(mut m, t, _) => {
-                        while m != 0 {
-                            let l = m.trailing_zeros();
-                            m &= m - 1;
-                            let tl = t[l as usize];
-                            if tl <= thi {
-                                thi = tl;
-                                best = Some((tl, blk.slots().start + l));
-                            }
-                        }
-                    }
-                    wide::Block::Exact => {
-                        for slot in blk.slots() {
-                            if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, &r, tmin, thi) {
-                                best = Some((t, slot));
-                                thi = t;
-                            }
-                        }
-                    }
-                }
+                self.leaf_nearest(blk, &r, &r4, tmin, &mut thi, &mut best);
             } else {
                 let n = self.wide.node(cur);
                 let (m, tn) = rb.hit(n, tmin, thi);
@@ -820,6 +800,30 @@ impl MeshData {
             match stack.pop_within(thi) {
                 Some((c, _)) => cur = c,
                 None => return best,
+            }
+        }
+    }
+
+    /// The nearest hit of one ray in one leaf block within `[tmin, *thi]`: a hit
+    /// at `t <= *thi` becomes `best` and the new `*thi` (so on equal `t` the
+    /// later triangle wins, in every walk alike).
+    #[inline(always)]
+    fn leaf_nearest(&self, blk: &wide::TriBlock, r: &WoopRay, r4: &wide::TriRay4, tmin: f32, thi: &mut f32, best: &mut Option<(f32, u32)>) {
+        match blk.nearest(r4, tmin, *thi) {
+            wide::Near::Miss => {}
+            wide::Near::Hit(t, l) => {
+                if t <= *thi {
+                    *thi = t;
+                    *best = Some((t, blk.slots().start + l));
+                }
+            }
+            wide::Near::Exact => {
+                for slot in blk.slots() {
+                    if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, r, tmin, *thi) {
+                        *best = Some((t, slot));
+                        *thi = t;
+                    }
+                }
             }
         }
     }
@@ -965,28 +969,7 @@ impl MeshData {
                     }
                     // SAFETY: written above (bit k of `ready`).
                     let (r, r4) = unsafe { rays[k].assume_init_ref() };
-                    let thi_k = &mut thi.0[k];
-                    match blk.test(r4, tmin[k], *thi_k) {
-                        wide::Block::Hits(mut m, t, _) => {
-                            while m != 0 {
-                                let l = m.trailing_zeros();
-                                m &= m - 1;
-                                let tl = t[l as usize];
-                                if tl <= *thi_k {
-                                    *thi_k = tl;
-                                    best[k] = Some((tl, blk.slots().start + l));
-                                }
-                            }
-                        }
-                        wide::Block::Exact => {
-                            for slot in blk.slots() {
-                                if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], *thi_k) {
-                                    best[k] = Some((t, slot));
-                                    *thi_k = t;
-                                }
-                            }
-                        }
-                    }
+                    self.leaf_nearest(blk, r, r4, tmin[k], &mut thi.0[k], &mut best[k]);
                 }
             } else {
                 let n = self.wide.node(cur);
@@ -995,32 +978,24 @@ impl MeshData {
                 let h = if AVX { unsafe { p.hit_avx(n, &tlo, &thi) } } else { p.hit(n, &tlo, &thi) };
                 #[cfg(not(target_arch = "x86_64"))]
                 let h = p.hit(n, &tlo, &thi);
-                let mut e = [(0u32, 0u32, 0.0f32); 4];
-                let mut ne = 0;
-                for (s, &(m, t)) in h.iter().enumerate() {
-                    let m = m & mask;
-                    if m == 0 {
-                        continue;
-                    }
-                    let item = (n.child(s as u32), m, t);
-                    let mut j = ne;
-                    ne += 1;
-                    while j > 0 && e[j - 1].2 < item.2 {
-                        e[j] = e[j - 1];
-                        j -= 1;
-                    }
-                    e[j] = item;
+                let mut hm = 0u32;
+                for (s, &(m, _)) in h.iter().enumerate() {
+                    hm |= ((m & mask != 0) as u32) << s;
                 }
+                let (order, ne) = wide::order4(h.map(|x| x.1), hm);
                 if ne > 0 {
-                    if sp + ne > STACK {
+                    if sp + 3 > STACK {
                         // A degenerate tree deeper than the stack: ray by ray.
                         return std::array::from_fn(|k| self.closest_hit(o[k], d[k], tmin[k], tmax[k]));
                     }
-                    for (slot, item) in stack[sp..sp + ne - 1].iter_mut().zip(&e[..ne - 1]) {
-                        slot.write(*item);
+                    let entry = |s: u32| (n.child(s), h[s as usize].0 & mask, h[s as usize].1);
+                    // Far to near, so the nearest is popped first; the writes past
+                    // `ne - 1` are scratch above the new top.
+                    for i in 0..3 {
+                        stack[sp + i].write(entry(order[(ne - 1).saturating_sub(i)]));
                     }
                     sp += ne - 1;
-                    (cur, mask) = (e[ne - 1].0, e[ne - 1].1);
+                    (cur, mask) = (n.child(order[0]), h[order[0] as usize].0 & mask);
                     continue;
                 }
             }
@@ -1032,16 +1007,12 @@ impl MeshData {
                 // SAFETY: slots below `sp` were written when pushed.
                 let (c, m, t) = unsafe { stack[sp].assume_init() };
                 // `t` is at most each ray's own entry: rays whose best hit is nearer drop out.
-                let mut m2 = 0;
                 let tt = t - t.abs() * SLAB_EPS;
-                let mut mm = m;
-                while mm != 0 {
-                    let k = mm.trailing_zeros();
-                    mm &= mm - 1;
-                    if tt <= thi.0[k as usize] {
-                        m2 |= 1 << k;
-                    }
+                let mut m2 = 0;
+                for k in 0..8 {
+                    m2 |= ((tt <= thi.0[k]) as u32) << k;
                 }
+                m2 &= m;
                 if m2 != 0 {
                     (cur, mask) = (c, m2);
                     break;

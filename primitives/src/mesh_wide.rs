@@ -220,6 +220,13 @@ pub(super) enum Block {
     Exact,
 }
 
+/// Result of [`TriBlock::nearest`].
+pub(super) enum Near {
+    Miss,
+    Hit(f32, u32),
+    Exact,
+}
+
 impl Wide {
     #[inline(always)]
     pub(super) fn node(&self, i: u32) -> &Node4 {
@@ -279,6 +286,24 @@ impl TriBlock {
         let t = (u * (sz * az) + vv * (sz * bz) + w * (sz * cz)) / det;
         let ok = inside & det.cmpne(z) & t.cmpge(Vec4::splat(tlo)) & t.cmple(Vec4::splat(thi));
         Block::Hits(ok.bitmask(), t, det)
+    }
+
+    /// The nearest lane hit within `[tlo, thi]`: its `t` and lane (on equal `t`
+    /// the last lane, as taking the lanes in order with `t <= thi` would), or
+    /// [`Near::Exact`] when the scalar test must decide.
+    #[inline(always)]
+    pub(super) fn nearest(&self, r: &TriRay4, tlo: f32, thi: f32) -> Near {
+        match self.test(r, tlo, thi) {
+            Block::Exact => Near::Exact,
+            Block::Hits(0, _, _) => Near::Miss,
+            Block::Hits(m, t, _) => {
+                let lanes = BVec4A::new(m & 1 != 0, m & 2 != 0, m & 4 != 0, m & 8 != 0);
+                let t = Vec4::select(lanes, t, Vec4::INFINITY);
+                let tm = t.min_element();
+                let last = 31 - (t.cmpeq(Vec4::splat(tm)).bitmask() & m).leading_zeros();
+                Near::Hit(tm, last)
+            }
+        }
     }
 
     /// The scalar test of one lane (exact ties).
@@ -353,11 +378,8 @@ impl Packet8 {
                     hi = hi.min((far - self.o[a].half(h)) * self.inv[a].half(h));
                 }
                 let m = (lo - lo.abs() * eps).cmple(hi + hi.abs() * eps);
-                let bm = m.bitmask();
-                if bm != 0 {
-                    mask |= bm << (4 * h);
-                    tmin = tmin.min(Vec4::select(m, lo, Vec4::INFINITY).min_element());
-                }
+                mask |= m.bitmask() << (4 * h);
+                tmin = tmin.min(Vec4::select(m, lo, Vec4::INFINITY).min_element());
             }
             (mask, tmin)
         })
@@ -391,9 +413,6 @@ impl Packet8 {
             let h = _mm256_add_ps(hi, _mm256_mul_ps(_mm256_andnot_ps(sign, hi), eps));
             let m = _mm256_cmp_ps::<_CMP_LE_OQ>(l, h);
             let mask = _mm256_movemask_ps(m) as u32;
-            if mask == 0 {
-                return (0, f32::INFINITY);
-            }
             // Smallest entry among the lanes hit (the others become +inf).
             let v = _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), lo, m);
             let v = _mm_min_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v));
@@ -402,6 +421,33 @@ impl Packet8 {
             (mask, _mm_cvtss_f32(v))
         })
     }
+}
+
+/// The children to visit, near to far, without branching on which were hit:
+/// the slots of the `hit` bits (bit s = slot s) sorted by their `t` (ties and
+/// the order past the count are arbitrary), and how many there are. The sort
+/// key is `t`'s order-preserving bit pattern with its two low bits replaced by
+/// the slot, so the order may differ from exact for `t`s a few ulps apart; it
+/// only steers the walk, the pruning uses the exact `t`.
+#[inline(always)]
+pub(super) fn order4(t: [f32; 4], hit: u32) -> ([u32; 4], usize) {
+    let mut k: [u32; 4] = std::array::from_fn(|s| {
+        let b = t[s].to_bits();
+        let ord = b ^ (((b as i32) >> 31) as u32 | 0x8000_0000);
+        let key = (ord & !3) | s as u32;
+        if hit & (1 << s) != 0 { key } else { u32::MAX & !3 | s as u32 }
+    });
+    let mut cx = |i: usize, j: usize| {
+        let (a, b) = (k[i], k[j]);
+        k[i] = a.min(b);
+        k[j] = a.max(b);
+    };
+    cx(0, 1);
+    cx(2, 3);
+    cx(0, 2);
+    cx(1, 3);
+    cx(1, 2);
+    (k.map(|x| x & 3), (hit & 0xf).count_ones() as usize)
 }
 
 /// Eight rays from one origin whose directions share an octant, as an interval
