@@ -265,47 +265,38 @@ const STACK: usize = 64;
 /// `spans_nearest`): a plain array (SmallVec's checks were 18% of the nearest
 /// walk on `scenes/bunny`, callgrind) of `(child code, entry parameter)`.
 struct OrderedStack {
-    items: [(u32, f32); STACK],
+    items: [MaybeUninit<(u32, f32)>; STACK],
     len: usize,
 }
 
 impl OrderedStack {
     #[inline(always)]
     fn new() -> Self {
-        OrderedStack { items: [(0, 0.0); STACK], len: 0 }
+        OrderedStack { items: [const { MaybeUninit::uninit() }; STACK], len: 0 }
     }
 
-    /// The children `m` of `n` that the ray meets, entering at `tn`: returns the
-    /// nearest and pushes the others far first. `Err` when they do not fit (a
-    /// degenerate tree deeper than the stack).
+    /// The children `m` (not empty) of `n` that the ray meets, entering at `tn`:
+    /// returns the nearest and pushes the others far first, without branching
+    /// on which were hit. `Err` when they might not fit (a degenerate tree
+    /// deeper than the stack).
     #[inline(always)]
     fn descend(&mut self, n: &wide::Node4, m: u32, tn: Vec4) -> Result<(u32, f32), ()> {
+        debug_assert!(m & 0xf != 0);
         if m & (m - 1) == 0 {
             let s = m.trailing_zeros();
             return Ok((n.child(s), tn[s as usize]));
         }
-        // Two to four hits: sort by entry (descending), push all but the nearest.
-        let mut e = [(0u32, 0.0f32); 4];
-        let mut ne = 0;
-        let mut mm = m;
-        while mm != 0 {
-            let s = mm.trailing_zeros();
-            mm &= mm - 1;
-            let item = (n.child(s), tn[s as usize]);
-            let mut j = ne;
-            ne += 1;
-            while j > 0 && e[j - 1].1 < item.1 {
-                e[j] = e[j - 1];
-                j -= 1;
-            }
-            e[j] = item;
-        }
-        if self.len + ne > STACK {
+        let (order, ne) = wide::order4(tn.to_array(), m);
+        if self.len + 3 > STACK {
             return Err(());
         }
-        self.items[self.len..self.len + ne - 1].copy_from_slice(&e[..ne - 1]);
+        // The writes past `ne - 1` are scratch above the new top.
+        for i in 0..3 {
+            let s = order[(ne - 1).saturating_sub(i)];
+            self.items[self.len + i].write((n.child(s), tn[s as usize]));
+        }
         self.len += ne - 1;
-        Ok(e[ne - 1])
+        Ok((n.child(order[0]), tn[order[0] as usize]))
     }
 
     /// The next pushed child whose entry is not past `limit` (boxes beyond it are
@@ -314,7 +305,8 @@ impl OrderedStack {
     fn pop_within(&mut self, limit: f32) -> Option<(u32, f32)> {
         while self.len > 0 {
             self.len -= 1;
-            let (c, t) = self.items[self.len];
+            // SAFETY: slots below `len` were written when pushed.
+            let (c, t) = unsafe { self.items[self.len].assume_init() };
             if t - t.abs() * SLAB_EPS <= limit {
                 return Some((c, t));
             }
