@@ -393,19 +393,33 @@ impl Packet8 {
     #[inline]
     pub(super) fn hit_avx(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
         use std::arch::x86_64::*;
-        // SAFETY (loads): F8 is 32-byte aligned and 8 lanes long.
-        let ld = |v: &F8| unsafe { _mm256_load_ps(v.0.as_ptr()) };
+        #[target_feature(enable = "avx")]
+        #[inline]
+        fn ld(v: &F8) -> __m256 {
+            // SAFETY: F8 is 32-byte aligned and 8 lanes long.
+            unsafe { _mm256_load_ps(v.0.as_ptr()) }
+        }
         let eps = _mm256_set1_ps(SLAB_EPS);
         let sign = _mm256_set1_ps(-0.0);
         let (tlo, thi) = (ld(tlo), ld(thi));
         let o = [ld(&self.o[0]), ld(&self.o[1]), ld(&self.o[2])];
         let inv = [ld(&self.inv[0]), ld(&self.inv[1]), ld(&self.inv[2])];
-        std::array::from_fn(|s| {
+        // Near and far plane rows per axis, picked once per node.
+        let mut rows: [(&[f32; 4], &[f32; 4]); 3] = [(&n.b[0], &n.b[1]), (&n.b[2], &n.b[3]), (&n.b[4], &n.b[5])];
+        for (a, r) in rows.iter_mut().enumerate() {
+            if self.near[a] != 0 {
+                *r = (r.1, r.0);
+            }
+        }
+        // A loop, not a closure: closures do not inherit `target_feature`, and the
+        // intrinsics would not be inlined into one.
+        let mut out = [(0u32, 0.0f32); 4];
+        for (s, slot) in out.iter_mut().enumerate() {
             let mut lo = tlo;
             let mut hi = thi;
             for a in 0..3 {
-                let near = _mm256_set1_ps(n.b[2 * a + self.near[a]][s]);
-                let far = _mm256_set1_ps(n.b[2 * a + 1 - self.near[a]][s]);
+                let near = _mm256_set1_ps(rows[a].0[s]);
+                let far = _mm256_set1_ps(rows[a].1[s]);
                 lo = _mm256_max_ps(lo, _mm256_mul_ps(_mm256_sub_ps(near, o[a]), inv[a]));
                 hi = _mm256_min_ps(hi, _mm256_mul_ps(_mm256_sub_ps(far, o[a]), inv[a]));
             }
@@ -418,8 +432,9 @@ impl Packet8 {
             let v = _mm_min_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v));
             let v = _mm_min_ps(v, _mm_movehl_ps(v, v));
             let v = _mm_min_ss(v, _mm_shuffle_ps::<1>(v, v));
-            (mask, _mm_cvtss_f32(v))
-        })
+            *slot = (mask, _mm_cvtss_f32(v));
+        }
+        out
     }
 }
 
