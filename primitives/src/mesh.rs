@@ -933,12 +933,7 @@ impl MeshData {
         };
         let tlo = wide::F8(*tmin);
         let mut thi = wide::F8(*tmax);
-        let mut active = 0u32;
-        for k in 0..8 {
-            if tmax[k] >= tmin[k] {
-                active |= 1 << k;
-            }
-        }
+        let active = thi.ge_mask(&tlo);
         // Each ray's triangle-test constants, set up when it first reaches a leaf
         // (most camera rays miss the mesh and never do).
         let mut rays: [MaybeUninit<(WoopRay, wide::TriRay4)>; 8] = [const { MaybeUninit::uninit() }; 8];

@@ -323,6 +323,12 @@ impl F8 {
     fn half(&self, h: usize) -> Vec4 {
         Vec4::from_slice(&self.0[4 * h..4 * h + 4])
     }
+
+    /// Bit k set where lane k of `self` >= lane k of `other` (false on NaN).
+    #[inline(always)]
+    pub(super) fn ge_mask(&self, other: &F8) -> u32 {
+        self.half(0).cmpge(other.half(0)).bitmask() | self.half(1).cmpge(other.half(1)).bitmask() << 4
+    }
 }
 
 /// Eight rays sharing a direction octant, SoA, for the packet walk: each child
