@@ -612,11 +612,10 @@ impl RenderScene {
     }
 
     fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch) -> Option<Hit> {
-        let ctx = *ctx;
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
         for &oi in &self.unbounded {
-            if let Some((t, s)) = self.object_first(oi, &ctx, ray.tmin, best_t, scratch) {
+            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -624,7 +623,7 @@ impl RenderScene {
             }
         }
         self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, best_t, |oi, _| {
-            if let Some((t, s)) = self.object_first(oi, &ctx, ray.tmin, best_t, scratch) {
+            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
