@@ -1411,6 +1411,13 @@ impl MeshData {
         s / (4.0 * std::f64::consts::PI) * self.orient as f64
     }
 
+    /// Does [`normal`](Self::normal) use its point for this surface id (only the
+    /// bounding-box faces of the winding rule do)?
+    #[inline]
+    pub fn normal_needs_point(&self, sub: u32) -> bool {
+        sub & !SUB_FLIP == SUB_BOX
+    }
+
     /// Outward unit normal (local space) of the crossing `sub` (from a span end).
     pub fn normal(&self, sub: u32, p: Vec3) -> Vec3 {
         let slot = sub & !SUB_FLIP;

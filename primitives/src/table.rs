@@ -584,8 +584,13 @@ impl LeafTable {
     pub fn normal(&self, i: u32, sub: u32, o: Vec3, d: Vec3, t: f32) -> Vec3 {
         let iu = i as usize;
         let m = &self.to_local[iu];
-        let l = m.transform_point3(o) + m.transform_vector3(d) * t;
         let p0 = self.p0[iu];
+        if self.kind[iu] == LeafKind::Mesh && !self.meshes[self.ext[iu] as usize].normal_needs_point(sub) {
+            // A triangle's normal does not depend on the point: skip transforming it.
+            let nl = self.meshes[self.ext[iu] as usize].normal(sub, Vec3::ZERO);
+            return (m.matrix3.transpose() * glam::Vec3A::from(nl)).normalize_or(glam::Vec3A::Y).into();
+        }
+        let l = m.transform_point3(o) + m.transform_vector3(d) * t;
         let nl = match self.kind[iu] {
             LeafKind::Sphere => l,
             LeafKind::Cuboid => {
