@@ -606,8 +606,12 @@ impl RenderScene {
         for &i in &self.packet_meshes {
             ps.memo.add(i, &tmin, &tmax, |sp| self.leaves.mesh_nearest8(i, o, &d, &tmin, &tmax, &slack, 0xff, sp));
         }
+        // All eight contexts are written before the first is read: reading one
+        // just built (its fields written piecewise, read with wider loads) stalls
+        // on store forwarding.
+        let ctx: [RayCtx; 8] = std::array::from_fn(|k| ctx[k].with_memo(&ps.memo, k));
         for k in 0..8 {
-            out[k] = self.intersect_ctx(&rays[k], &ctx[k].with_memo(&ps.memo, k), &mut ps.scratch);
+            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch);
         }
     }
 
