@@ -135,6 +135,9 @@ fn random_csg_with_meshes_packets_match_single_rays() {
     println!("seed {seed:#x}");
     let mut rng = SmallRng::seed_from_u64(seed);
     let (mut rays, mut hits, mut packed_scenes) = (0, 0, 0);
+    // Rays that miss in scenes whose every object lies inside a packet mesh: the
+    // packet path skips their evaluation when they miss those meshes.
+    let (mut covered_scenes, mut covered_misses) = (0, 0);
     for case in 0..150 {
         let mut trees = vec![random_tree_with(&mut rng, 3, true)];
         if case % 3 == 0 {
@@ -143,6 +146,7 @@ fn random_csg_with_meshes_packets_match_single_rays() {
         packed_scenes += trees.iter().any(|t| t.json().contains("mesh")) as usize;
         let scene = bake(&trees);
         remove_mesh_files(&trees);
+        covered_scenes += scene.packet_covered() as usize;
         let mut ps = rothray::engine::PacketScratch::default();
         for p in 0..20 {
             let (o, d) = random_ray(&mut rng);
@@ -160,6 +164,7 @@ fn random_csg_with_meshes_packets_match_single_rays() {
                 assert_eq!(key(out[k]), key(one), "case {case} packet {p} ray {k}: {:?} trees {:?}", packet[k], trees.iter().map(|t| t.json()).collect::<Vec<_>>());
                 rays += 1;
                 hits += one.is_some() as usize;
+                covered_misses += (scene.packet_covered() && one.is_none()) as usize;
                 // And the first surface of each object's full diagram.
                 let firsts: Vec<f32> = (0..trees.len() as u32)
                     .filter_map(|oi| {
@@ -173,5 +178,6 @@ fn random_csg_with_meshes_packets_match_single_rays() {
         }
     }
     println!("{rays} rays in packets, {hits} hits, {packed_scenes} scenes with meshes");
-    assert!(hits > 1000 && packed_scenes > 70);
+    println!("{covered_scenes} scenes inside packet meshes, {covered_misses} missing rays there");
+    assert!(hits > 1000 && packed_scenes > 70 && covered_misses > 500);
 }

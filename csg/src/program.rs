@@ -170,6 +170,15 @@ impl PacketMemo {
         }
     }
 
+    /// Is `leaf` known to have no span on `[lo, hi]` for lane `k` (its recorded
+    /// query covers the range, is exact on all of it and found nothing)?
+    #[inline]
+    pub fn empty(&self, k: usize, leaf: u32, lo: f32, hi: f32) -> bool {
+        self.leaves[..self.len].iter().find(|e| e.leaf == leaf).is_some_and(|e| {
+            e.done & (1 << k) != 0 && lo >= e.tmin[k] && hi <= e.tmax[k] && e.valid[k] >= hi && e.spans[k].is_empty()
+        })
+    }
+
     /// Lane `k`'s spans of `leaf` on `[lo, hi]` and where they stop being exact,
     /// when the recorded query covers that range (`None`: ask the leaf).
     #[inline]

@@ -166,6 +166,11 @@ pub struct RenderScene {
     /// whole packets by [`RenderScene::intersect_packet`] (empty when there are
     /// more than [`PACKET_MESHES`]).
     packet_meshes: Vec<u32>,
+    /// Per object, a packet mesh that contains its whole solid (see
+    /// [`containing_leaves`]), when every object has one: a ray whose packet
+    /// found all of them empty on its range hits nothing and skips its own
+    /// evaluation.
+    packet_cover: Option<Vec<u32>>,
 }
 
 /// At most this many mesh leaves are traced ahead per packet; scenes with more
@@ -200,6 +205,26 @@ fn nearest_mode_meshes(program: &Program, leaves: &LeafTable, roots: impl Iterat
         }
     }
     found
+}
+
+/// Leaves whose solid contains the whole solid of node `n`: the node itself
+/// when a leaf, the leaves of any operand of an intersection, those of a
+/// difference's first operand; none through a union. Boolean operations on
+/// Roth spans never produce a span where such a leaf has none, so a ray that
+/// misses one of them misses the node.
+fn containing_leaves(program: &Program, n: u32, out: &mut Vec<u32>) {
+    let nu = n as usize;
+    let (first, count) = (program.first[nu] as usize, program.count[nu] as usize);
+    match program.kind[nu] {
+        NodeKind::Leaf => out.push(first as u32),
+        NodeKind::Intersection => {
+            for &c in &program.children[first..first + count] {
+                containing_leaves(program, c, out);
+            }
+        }
+        NodeKind::Difference if count > 0 => containing_leaves(program, program.children[first], out),
+        _ => {}
+    }
 }
 
 thread_local! {
@@ -501,6 +526,15 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     if pm.len() > PACKET_MESHES {
         pm.clear();
     }
+    scene.packet_cover = scene
+        .objects
+        .iter()
+        .map(|o| {
+            let mut c = Vec::new();
+            containing_leaves(&scene.program, o.root, &mut c);
+            c.into_iter().find(|l| pm.contains(l))
+        })
+        .collect();
     scene.packet_meshes = pm;
     scene.bounds = bounds;
     scene.eps = 1e-5 * diag;
@@ -611,8 +645,22 @@ impl RenderScene {
         // on store forwarding.
         let ctx: [RayCtx; 8] = std::array::from_fn(|k| ctx[k].with_memo(&ps.memo, k));
         for k in 0..8 {
+            if let Some(cover) = &self.packet_cover {
+                // Every object lies inside a mesh this ray misses: no hit.
+                if cover.iter().all(|&l| ps.memo.empty(k, l, tmin[k], tmax[k])) {
+                    out[k] = None;
+                    continue;
+                }
+            }
             out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch);
         }
+    }
+
+    /// Does every object lie inside a packet mesh (so that packet rays missing
+    /// those meshes skip their evaluation)? For tests.
+    #[doc(hidden)]
+    pub fn packet_covered(&self) -> bool {
+        !self.packet_meshes.is_empty() && self.packet_cover.is_some()
     }
 
     fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch) -> Option<Hit> {

@@ -708,3 +708,40 @@ fn mesh_spans_nearest8_matches_single_rays() {
         assert!(narrow_packed * 10 > narrow * 8, "{name}: narrow bundles should go as packets");
     }
 }
+
+/// The branch-free child ordering: the hit slots come first, by `t` (up to the
+/// two key bits it gives up), each exactly once; checked against a sort, with
+/// negative, zero, infinite and tied `t`s.
+#[test]
+fn mesh_order4_sorts_hit_children() {
+    let seed = 44u64;
+    println!("seed {seed}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let pick = |rng: &mut SmallRng| match rng.gen_range(0..6) {
+        0 => 0.0,
+        1 => -0.0,
+        2 => f32::INFINITY,
+        3 => rng.gen_range(-5.0f32..0.0),
+        4 => 1.0,
+        _ => rng.gen_range(0.0f32..100.0),
+    };
+    for case in 0..20000 {
+        let t: [f32; 4] = std::array::from_fn(|_| pick(&mut rng));
+        let hit = rng.gen_range(1u32..16);
+        let (order, n) = wide::order4(t, hit);
+        assert_eq!(n, hit.count_ones() as usize, "case {case}");
+        let mut seen = 0u32;
+        for &s in &order {
+            seen |= 1 << s;
+        }
+        assert_eq!(seen, 0xf, "case {case}: {order:?} is not a permutation");
+        for i in 0..n {
+            assert!(hit & (1 << order[i]) != 0, "case {case}: t {t:?} hit {hit:#b} order {order:?}");
+        }
+        for i in 1..n {
+            let (a, b) = (t[order[i - 1] as usize], t[order[i] as usize]);
+            // Keys drop the two low mantissa bits: a may exceed b by a few ulps only.
+            assert!(a <= b || (a - b).abs() <= 4.0 * a.abs().max(b.abs()) * f32::EPSILON, "case {case}: t {t:?} hit {hit:#b} order {order:?}");
+        }
+    }
+}
