@@ -456,7 +456,7 @@ pub(super) fn order4(t: [f32; 4], hit: u32) -> ([u32; 4], usize) {
         let b = t[s].to_bits();
         let ord = b ^ (((b as i32) >> 31) as u32 | 0x8000_0000);
         let key = (ord & !3) | s as u32;
-        if hit & (1 << s) != 0 { key } else { u32::MAX & !3 | s as u32 }
+        if hit & (1 << s) != 0 { key } else { !3 | s as u32 }
     });
     let mut cx = |i: usize, j: usize| {
         let (a, b) = (k[i], k[j]);
