@@ -1214,6 +1214,65 @@ impl MeshData {
         tmin: &[f32; 8],
         tmax: &[f32; 8],
         slack: &[f32; 8],
+        active: u32,
+        leaf: u32,
+        out: &mut [Vec<Span>; 8],
+    ) -> (u32, [f32; 8]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the CPU has AVX.
+            return unsafe { self.spans_nearest8_avx(o, d, tmin, tmax, slack, active, leaf, out) };
+        }
+        self.spans_nearest8_in::<false>(o, d, tmin, tmax, slack, active, leaf, out)
+    }
+
+    /// [`spans_nearest8`](Self::spans_nearest8) without the AVX leaf test (what
+    /// CPUs without AVX run), for tests: both give the same answers.
+    #[doc(hidden)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn spans_nearest8_sse(
+        &self,
+        o: Vec3,
+        d: &[Vec3; 8],
+        tmin: &[f32; 8],
+        tmax: &[f32; 8],
+        slack: &[f32; 8],
+        active: u32,
+        leaf: u32,
+        out: &mut [Vec<Span>; 8],
+    ) -> (u32, [f32; 8]) {
+        self.spans_nearest8_in::<false>(o, d, tmin, tmax, slack, active, leaf, out)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn spans_nearest8_avx(
+        &self,
+        o: Vec3,
+        d: &[Vec3; 8],
+        tmin: &[f32; 8],
+        tmax: &[f32; 8],
+        slack: &[f32; 8],
+        active: u32,
+        leaf: u32,
+        out: &mut [Vec<Span>; 8],
+    ) -> (u32, [f32; 8]) {
+        self.spans_nearest8_in::<true>(o, d, tmin, tmax, slack, active, leaf, out)
+    }
+
+    /// The packet walk; with `AVX` (only instantiated inside a function compiled
+    /// with AVX) a leaf that three or more rays sharing their projection axes
+    /// need is tested one triangle at a time against all of them.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn spans_nearest8_in<const AVX: bool>(
+        &self,
+        o: Vec3,
+        d: &[Vec3; 8],
+        tmin: &[f32; 8],
+        tmax: &[f32; 8],
+        slack: &[f32; 8],
         mut active: u32,
         leaf: u32,
         out: &mut [Vec<Span>; 8],
@@ -1262,8 +1321,14 @@ impl MeshData {
             return (0, cut);
         }
         // Per-ray constants of the triangle test, made when a ray first reaches a leaf.
-        let mut rays: [std::mem::MaybeUninit<(WoopRay, wide::TriRay4)>; 8] = [const { std::mem::MaybeUninit::uninit() }; 8];
+        let mut rays: [MaybeUninit<(WoopRay, wide::TriRay4)>; 8] = [const { MaybeUninit::uninit() }; 8];
+        // Set up on the first leaf: `ready` (the active rays), their shears by
+        // axis, whether they share the projection axes `axes`, their starts.
         let mut ready = 0u32;
+        let mut shear = [wide::F8([0.0; 8]); 3];
+        let mut shared = true;
+        let mut axes = [0usize, 1, 2];
+        let mut tlo8 = wide::F8([0.0; 8]);
         let mut xs: [SmallVec<[Crossing; 16]>; 8] = Default::default();
         let mut stack = OrderedStack::new();
         // The root's children were tested above.
@@ -1275,21 +1340,75 @@ impl MeshData {
             if cur & wide::LEAF != 0 {
                 let blk = self.wide.block(cur);
                 let te = entry - entry.abs() * SLAB_EPS;
-                let mut mm = active;
+                // `entry` bounds every ray's own entry into this leaf's box from below.
+                let mut need = 0u32;
+                for (k, &c) in cut.iter().enumerate() {
+                    need |= ((te <= c) as u32) << k;
+                }
+                need &= active;
+                if ready == 0 && need != 0 {
+                    // First leaf: every active ray's triangle-test constants, and
+                    // whether they share their projection axes (coherent rays do).
+                    let mut m = active;
+                    let mut k0 = None;
+                    while m != 0 {
+                        let k = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let r = WoopRay::new(o, d[k]);
+                        for a in 0..3 {
+                            shear[a].0[k] = r.s[a];
+                        }
+                        match k0 {
+                            None => k0 = Some(r.k),
+                            Some(kk) if kk != r.k => shared = false,
+                            _ => {}
+                        }
+                        rays[k].write((r, wide::TriRay4::new(&r)));
+                    }
+                    ready = active;
+                    axes = k0.unwrap_or([0, 1, 2]);
+                    tlo8 = wide::F8(*tmin);
+                }
                 let mut shrunk = false;
+                #[cfg(target_arch = "x86_64")]
+                if AVX && shared && need.count_ones() >= 3 {
+                    let ok = o.to_array();
+                    let cut8 = wide::F8(cut);
+                    // SAFETY: AVX is only true in `spans_nearest8_avx`, compiled with AVX.
+                    let b = unsafe { blk.test8_avx(axes, [ok[axes[0]], ok[axes[1]], ok[axes[2]]], &shear, &tlo8, &cut8) };
+                    let exact = b.inside_any & b.zero_any & need;
+                    let mut mm = exact;
+                    while mm != 0 {
+                        let k = mm.trailing_zeros() as usize;
+                        mm &= mm - 1;
+                        // SAFETY: every active lane was written on the first leaf.
+                        let (r, _) = unsafe { rays[k].assume_init_ref() };
+                        for slot in blk.slots() {
+                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
+                                xs[k].push(Crossing { t, slot, front });
+                                cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                                shrunk = true;
+                            }
+                        }
+                    }
+                    for l in 0..blk.slots().len() {
+                        let mut m = b.ok[l] & need & !exact;
+                        while m != 0 {
+                            let k = m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            let t = b.t[l].0[k];
+                            xs[k].push(Crossing { t, slot: blk.slots().start + l as u32, front: b.front[l] & (1 << k) != 0 });
+                            cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                            shrunk = true;
+                        }
+                    }
+                    need = 0;
+                }
+                let mut mm = need;
                 while mm != 0 {
                     let k = mm.trailing_zeros() as usize;
                     mm &= mm - 1;
-                    // `entry` bounds every ray's own entry into this leaf's box from below.
-                    if te > cut[k] {
-                        continue;
-                    }
-                    if ready & (1 << k) == 0 {
-                        let r = WoopRay::new(o, d[k]);
-                        rays[k].write((r, wide::TriRay4::new(&r)));
-                        ready |= 1 << k;
-                    }
-                    // SAFETY: lane k was written just above or on an earlier leaf.
+                    // SAFETY: every active lane was written on the first leaf.
                     let (r, r4) = unsafe { rays[k].assume_init_ref() };
                     match blk.test(r4, tmin[k], cut[k]) {
                         wide::Block::Hits(mut m, t, det) => {

@@ -647,7 +647,8 @@ fn mesh_closest_hit8_matches_single_rays() {
 /// The packet walk of the nearest query gives every ray what its own
 /// `spans_nearest` gives (the same spans and cut, bit for bit), for coherent and
 /// spread bundles, bundles aimed at vertices, per-ray clipped ranges and
-/// slacks, and starts inside the bounds (left to the single-ray query).
+/// slacks, and starts inside the bounds (left to the single-ray query); with
+/// the AVX leaf test (eight rays against one triangle) and without.
 #[test]
 fn mesh_spans_nearest8_matches_single_rays() {
     let seed = 33u64;
@@ -685,6 +686,11 @@ fn mesh_spans_nearest8_matches_single_rays() {
             let mut out: [Vec<Span>; 8] = Default::default();
             let (done, cut) = m.spans_nearest8(o, &d, &tmin, &tmax, &slack, active, 7, &mut out);
             assert_eq!(done & !active, 0, "{name}: bundle {i}: a ray outside the active set was traced");
+            // The SSE2 walk (machines without AVX: every leaf ray by ray) agrees exactly.
+            let mut out_sse: [Vec<Span>; 8] = Default::default();
+            let sse = m.spans_nearest8_sse(o, &d, &tmin, &tmax, &slack, active, 7, &mut out_sse);
+            assert_eq!((sse.0, sse.1.map(f32::to_bits)), (done, cut.map(f32::to_bits)), "{name}: bundle {i}: SSE2 walk");
+            assert_eq!(out_sse, out, "{name}: bundle {i}: SSE2 walk spans");
             let is_narrow = i % 3 != 0 && i % 11 != 0 && active == 0xff;
             for k in 0..8 {
                 if is_narrow && tmax[k] >= tmin[k] {

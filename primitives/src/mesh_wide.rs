@@ -220,6 +220,19 @@ pub(super) enum Block {
     Exact,
 }
 
+/// Result of [`TriBlock::test8_avx`], per triangle lane `l` and ray bit `k`.
+pub(super) struct Block8 {
+    /// Rays that hit triangle `l` within their range.
+    pub(super) ok: [u32; 4],
+    /// Rays for which triangle `l` faces front (det > 0).
+    pub(super) front: [u32; 4],
+    pub(super) t: [F8; 4],
+    /// Rays with some lane inside (or a padding lane), and with some zero edge
+    /// function: `test` answers `Exact` for the rays in both.
+    pub(super) inside_any: u32,
+    pub(super) zero_any: u32,
+}
+
 /// Result of [`TriBlock::nearest`].
 pub(super) enum Near {
     Miss,
@@ -286,6 +299,77 @@ impl TriBlock {
         let t = (u * (sz * az) + vv * (sz * bz) + w * (sz * cz)) / det;
         let ok = inside & det.cmpne(z) & t.cmpge(Vec4::splat(tlo)) & t.cmple(Vec4::splat(thi));
         Block::Hits(ok.bitmask(), t, det)
+    }
+
+    /// The watertight test of every triangle of the block against eight rays
+    /// from one origin that share the projection axes `k` (per-ray shear `s`,
+    /// origin `o` in the `k` order), one 8-lane AVX step per triangle. Per
+    /// (ray, triangle) the operations are those of [`test`](Self::test) in the
+    /// same order, so the hits, `t`s and facings are the same bits; `exact`
+    /// marks the rays for which `test` would answer [`Block::Exact`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(super) fn test8_avx(&self, k: [usize; 3], o: [f32; 3], s: &[F8; 3], tlo: &F8, thi: &F8) -> Block8 {
+        use std::arch::x86_64::*;
+        #[target_feature(enable = "avx")]
+        #[inline]
+        fn ld(v: &F8) -> __m256 {
+            // SAFETY: F8 is 32-byte aligned and 8 lanes long.
+            unsafe { _mm256_load_ps(v.0.as_ptr()) }
+        }
+        let [kx, ky, kz] = k;
+        let [ox, oy, oz] = o;
+        let (sx, sy, sz) = (ld(&s[0]), ld(&s[1]), ld(&s[2]));
+        let (tlo, thi) = (ld(tlo), ld(thi));
+        let z = _mm256_setzero_ps();
+        let mut out = Block8 { ok: [0; 4], front: [0; 4], t: [F8([0.0; 8]); 4], inside_any: 0, zero_any: 0 };
+        let n = (self.count as usize).min(4);
+        for l in 0..n {
+            let v = |c: usize, a: usize| self.v[c * 3 + a][l];
+            let (az, bz, cz) = (v(0, kz) - oz, v(1, kz) - oz, v(2, kz) - oz);
+            // Macros, not closures: closures do not inherit `target_feature`.
+            macro_rules! lane {
+                ($p:expr, $q:expr, $r:expr) => {
+                    _mm256_sub_ps(_mm256_set1_ps($p), _mm256_mul_ps($q, _mm256_set1_ps($r)))
+                };
+            }
+            macro_rules! bits {
+                ($op:ident, $a:expr, $b:expr) => {
+                    _mm256_movemask_ps(_mm256_cmp_ps::<$op>($a, $b)) as u32
+                };
+            }
+            let ax = lane!(v(0, kx) - ox, sx, az);
+            let ay = lane!(v(0, ky) - oy, sy, az);
+            let bx = lane!(v(1, kx) - ox, sx, bz);
+            let by = lane!(v(1, ky) - oy, sy, bz);
+            let cx = lane!(v(2, kx) - ox, sx, cz);
+            let cy = lane!(v(2, ky) - oy, sy, cz);
+            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+            let vv = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+            let neg = bits!(_CMP_LT_OQ, u, z) | bits!(_CMP_LT_OQ, vv, z) | bits!(_CMP_LT_OQ, w, z);
+            let pos = bits!(_CMP_GT_OQ, u, z) | bits!(_CMP_GT_OQ, vv, z) | bits!(_CMP_GT_OQ, w, z);
+            let inside = !(neg & pos) & 0xff;
+            out.inside_any |= inside;
+            out.zero_any |= bits!(_CMP_EQ_OQ, u, z) | bits!(_CMP_EQ_OQ, vv, z) | bits!(_CMP_EQ_OQ, w, z);
+            let det = _mm256_add_ps(_mm256_add_ps(u, vv), w);
+            let num = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(u, _mm256_mul_ps(sz, _mm256_set1_ps(az))), _mm256_mul_ps(vv, _mm256_mul_ps(sz, _mm256_set1_ps(bz)))),
+                _mm256_mul_ps(w, _mm256_mul_ps(sz, _mm256_set1_ps(cz))),
+            );
+            let t = _mm256_div_ps(num, det);
+            let ok = inside & bits!(_CMP_NEQ_UQ, det, z) & bits!(_CMP_GE_OQ, t, tlo) & bits!(_CMP_LE_OQ, t, thi);
+            out.ok[l] = ok;
+            out.front[l] = bits!(_CMP_GT_OQ, det, z);
+            // SAFETY: F8 is 32-byte aligned and 8 lanes long.
+            unsafe { _mm256_store_ps(out.t[l].0.as_mut_ptr(), t) };
+        }
+        // The padding lanes of `test` (NaN) count as inside and never as zero.
+        if n < 4 {
+            out.inside_any = 0xff;
+        }
+        out
     }
 
     /// The nearest lane hit within `[tlo, thi]`: its `t` and lane (on equal `t`
