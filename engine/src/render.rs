@@ -291,9 +291,12 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                         let px = &px[..np];
                         let mut acc = [Vec3::ZERO; 8];
                         let mut dmin = [f32::INFINITY; 8];
-                        let mut rs = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
                         for si in 0..spp {
-                            for (k, &(r, x)) in px.iter().enumerate() {
+                            // Built whole, not filled into a template array: reading
+                            // back a template's piecewise stores stalled on store
+                            // forwarding. Lanes past `np` repeat the last pixel.
+                            let rs: [Ray; 8] = std::array::from_fn(|k| {
+                                let (r, x) = px[k.min(np - 1)];
                                 let y = y0 + r;
                                 let (jx, jy) = if spp == 1 {
                                     (0.5, 0.5)
@@ -301,8 +304,8 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                                     let rr = hash2((y * w + x) as u32, si);
                                     ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
                                 };
-                                rs[k] = rays.ray(x as f32 + jx, y as f32 + jy);
-                            }
+                                rays.ray(x as f32 + jx, y as f32 + jy)
+                            });
                             let rs = &rs[..np];
                             let mut hits = [None; 8];
                             scene.intersect_packet(rs, ps, &mut hits);
