@@ -705,6 +705,10 @@ fn mesh_spans_nearest8_matches_single_rays() {
                 packed += 1;
                 let mut one: Vec<Span> = Vec::new();
                 let v = m.spans_nearest(o, d[k], tmin[k], tmax[k], slack[k], 7, &mut one);
+                // The contract: exact on [tmin, v], i.e. the full query clipped there.
+                let mut full: Vec<Span> = Vec::new();
+                m.spans(o, d[k], tmin[k], v.min(tmax[k]), 7, &mut full);
+                assert_eq!(full, one, "{name}: bundle {i} ray {k}: not the full spans on [tmin, {v}]");
                 assert_eq!(v, cut[k], "{name}: bundle {i} ray {k}: cut; o {o:?} d {:?}", d[k]);
                 let ts = |s: &[Span]| s.iter().map(|s| (s.t0, s.t1, s.s0, s.s1)).collect::<Vec<_>>();
                 assert_eq!(ts(&out[k]), ts(&one), "{name}: bundle {i} ray {k}: spans; o {o:?} d {:?}", d[k]);
