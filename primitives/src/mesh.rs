@@ -1199,7 +1199,7 @@ impl MeshData {
     /// [`MeshData::spans_nearest`] for eight rays from one origin `o` at once
     /// (camera rays through neighbouring pixels): the BVH is walked once for the
     /// packet with interval bounds of the rays' slab parameters
-    /// ([`wide::Frustum8`]), pruned at the largest cut among the rays, and each
+    /// (`Frustum8`), pruned at the largest cut among the rays, and each
     /// leaf that some ray may still need is tested with that ray alone, within
     /// its own `[tmin, cut]`. Every crossing a ray's own walk would keep is
     /// found, so each ray gets the spans and cut that `spans_nearest` gives it.
