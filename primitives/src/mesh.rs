@@ -1021,6 +1021,13 @@ impl MeshData {
         let mut xs: SmallVec<[Crossing; 32]> = SmallVec::new();
         match self.rule {
             InsideRule::Orientation => {
+                if self.outside_at(o, d, tmin) {
+                    // The count at tmin is zero: only the crossings up to tmax matter.
+                    self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
+                    self.sort_signed(&mut xs);
+                    self.walk_signed(&xs, 0, tmin, tmax, leaf, out);
+                    return;
+                }
                 // Collect to the box exit: the crossings past tmax tell how deep inside
                 // the ray is at tmin (the signed count over the whole line is zero).
                 self.for_each_crossing(o, d, tmin, f32::INFINITY, |c| xs.push(c));
@@ -1129,10 +1136,7 @@ impl MeshData {
         if !(tmax >= tmin) || self.wide.is_empty() {
             return f32::INFINITY;
         }
-        let p = o + d * tmin;
-        let pad = (self.bounds.max - self.bounds.min) * 1e-4;
-        let outside = p.cmplt(self.bounds.min - pad).any() || p.cmpgt(self.bounds.max + pad).any();
-        if self.rule != InsideRule::Orientation || !outside || !p.is_finite() {
+        if self.rule != InsideRule::Orientation || !self.outside_at(o, d, tmin) {
             self.spans(o, d, tmin, tmax, leaf, out);
             return f32::INFINITY;
         }
@@ -1314,11 +1318,8 @@ impl MeshData {
         if root_mask == 0 {
             return (active, cut);
         }
-        let pad = (self.bounds.max - self.bounds.min) * 1e-4;
         for k in 0..8 {
-            let p = o + d[k] * tmin[k];
-            let outside = p.cmplt(self.bounds.min - pad).any() || p.cmpgt(self.bounds.max + pad).any();
-            if !outside || !p.is_finite() {
+            if !self.outside_at(o, d[k], tmin[k]) {
                 active &= !(1 << k);
                 cut[k] = f32::INFINITY;
             }
@@ -1468,6 +1469,16 @@ impl MeshData {
             self.walk_signed(&xs[k], 0, tmin[k], cut[k].min(tmax[k]), leaf, &mut out[k]);
         }
         (active, cut)
+    }
+
+    /// Is the point at `t` on the ray finite and clearly outside the bounds (so
+    /// that the signed crossing count there is zero)?
+    #[inline]
+    fn outside_at(&self, o: Vec3, d: Vec3, t: f32) -> bool {
+        let p = o + d * t;
+        let pad = (self.bounds.max - self.bounds.min) * 1e-4;
+        let outside = p.cmplt(self.bounds.min - pad).any() || p.cmpgt(self.bounds.max + pad).any();
+        outside && p.is_finite()
     }
 
     /// The surface id of a crossing that enters (`entering`) or leaves the solid.
