@@ -151,6 +151,9 @@ const MAX_LEAF: u32 = 4;
 pub struct MeshData {
     /// Triangle corners, in BVH leaf order (slot order).
     tris: Vec<[Vec3; 3]>,
+    /// Unit normals per slot (by the corners' winding), made once: shading
+    /// asked for one per hit.
+    normals: Vec<Vec3>,
     /// Slot -> triangle index in the input list.
     tri_id: Vec<u32>,
     /// BVH over slots (`prims` is the identity); used by the winding number.
@@ -595,9 +598,11 @@ impl MeshData {
         }
         let (pairs, root) = build_pairs(&bvh.nodes);
         let wide = wide::Wide::build(&bvh.nodes, &tris);
+        let normals = tris.iter().map(|t| (t[1] - t[0]).cross(t[2] - t[0]).normalize_or(Vec3::Y)).collect();
         let mut m = MeshData {
             wide,
             tris,
+            normals,
             tri_id,
             bvh,
             pairs,
@@ -1574,8 +1579,7 @@ impl MeshData {
             }
             return best.1;
         }
-        let Some(t) = self.tris.get(slot as usize) else { return Vec3::Y };
-        let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or(Vec3::Y);
+        let Some(&n) = self.normals.get(slot as usize) else { return Vec3::Y };
         if sub & SUB_FLIP != 0 { -n } else { n }
     }
 
