@@ -314,9 +314,10 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                         let mut acc = [Vec3::ZERO; 8];
                         let mut dmin = [f32::INFINITY; 8];
                         for si in 0..spp {
-                            // Built whole, not filled into a template array: reading
-                            // back a template's piecewise stores stalled on store
-                            // forwarding. Lanes past `np` repeat the last pixel.
+                            // Made by `ray8`, four at a time, not filled one by one
+                            // into a template array (reading back the template's
+                            // piecewise stores stalled on store forwarding). Lanes
+                            // past `np` repeat the last pixel.
                             let mut fx = [0.0f32; 8];
                             let mut fy = [0.0f32; 8];
                             for k in 0..8 {
