@@ -312,16 +312,10 @@ impl TriBlock {
     #[inline]
     pub(super) fn test8_avx(&self, k: [usize; 3], o: [f32; 3], s: &[F8; 3], tlo: &F8, thi: &F8) -> Block8 {
         use std::arch::x86_64::*;
-        #[target_feature(enable = "avx")]
-        #[inline]
-        fn ld(v: &F8) -> __m256 {
-            // SAFETY: F8 is 32-byte aligned and 8 lanes long.
-            unsafe { _mm256_load_ps(v.0.as_ptr()) }
-        }
         let [kx, ky, kz] = k;
         let [ox, oy, oz] = o;
-        let (sx, sy, sz) = (ld(&s[0]), ld(&s[1]), ld(&s[2]));
-        let (tlo, thi) = (ld(tlo), ld(thi));
+        let (sx, sy, sz) = (F8::load(&s[0]), F8::load(&s[1]), F8::load(&s[2]));
+        let (tlo, thi) = (F8::load(tlo), F8::load(thi));
         let z = _mm256_setzero_ps();
         let mut out = Block8 { ok: [0; 4], front: [0; 4], t: [F8([0.0; 8]); 4], inside_any: 0, zero_any: 0 };
         let n = (self.count as usize).min(4);
@@ -408,6 +402,15 @@ impl F8 {
         Vec4::from_slice(&self.0[4 * h..4 * h + 4])
     }
 
+    /// The eight lanes as one AVX register.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    fn load(&self) -> std::arch::x86_64::__m256 {
+        // SAFETY: F8 is 32-byte aligned and 8 lanes long.
+        unsafe { std::arch::x86_64::_mm256_load_ps(self.0.as_ptr()) }
+    }
+
     /// Bit k set where lane k of `self` >= lane k of `other` (false on NaN).
     #[inline(always)]
     pub(super) fn ge_mask(&self, other: &F8) -> u32 {
@@ -483,17 +486,11 @@ impl Packet8 {
     #[inline]
     pub(super) fn hit_avx(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
         use std::arch::x86_64::*;
-        #[target_feature(enable = "avx")]
-        #[inline]
-        fn ld(v: &F8) -> __m256 {
-            // SAFETY: F8 is 32-byte aligned and 8 lanes long.
-            unsafe { _mm256_load_ps(v.0.as_ptr()) }
-        }
         let eps = _mm256_set1_ps(SLAB_EPS);
         let sign = _mm256_set1_ps(-0.0);
-        let (tlo, thi) = (ld(tlo), ld(thi));
-        let o = [ld(&self.o[0]), ld(&self.o[1]), ld(&self.o[2])];
-        let inv = [ld(&self.inv[0]), ld(&self.inv[1]), ld(&self.inv[2])];
+        let (tlo, thi) = (F8::load(tlo), F8::load(thi));
+        let o = [F8::load(&self.o[0]), F8::load(&self.o[1]), F8::load(&self.o[2])];
+        let inv = [F8::load(&self.inv[0]), F8::load(&self.inv[1]), F8::load(&self.inv[2])];
         // Near and far plane rows per axis, picked once per node.
         let mut rows: [(&[f32; 4], &[f32; 4]); 3] = [(&n.b[0], &n.b[1]), (&n.b[2], &n.b[3]), (&n.b[4], &n.b[5])];
         for (a, r) in rows.iter_mut().enumerate() {
