@@ -9,6 +9,7 @@ use rothray_csg::{first_surface, Mode, NodeKind, PacketMemo, Program, ProgramBui
 use rothray_primitives::{
     bvh::FlatBvh,
     gcyl::GenCylData,
+    mesh::NearestRays8,
     sweep::SweptSphereData,
     table::LeafData,
     Aabb, LeafError, LeafShape, LeafTable, Span, Surf,
@@ -668,8 +669,9 @@ impl RenderScene {
         let tmax: [f32; 8] = std::array::from_fn(|k| rays[k].tmax);
         let slack: [f32; 8] = std::array::from_fn(|k| ctx[k].nearest_slack());
         ps.memo.clear();
+        let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack };
         for &i in &self.packet_meshes {
-            ps.memo.add(i, &tmin, &tmax, |sp| self.leaves.mesh_nearest8(i, o, &d, &tmin, &tmax, &slack, 0xff, sp));
+            ps.memo.add(i, &tmin, &tmax, |sp| self.leaves.mesh_nearest8(i, &q, 0xff, sp));
         }
         // All eight contexts are written before the first is read: reading one
         // just built (its fields written piecewise, read with wider loads) stalls

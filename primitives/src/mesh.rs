@@ -246,6 +246,22 @@ impl WoopRay {
     }
 }
 
+/// Eight rays from one origin for [`MeshData::spans_nearest8`] (camera rays
+/// through neighbouring pixels): directions, ranges and per-ray slacks.
+#[derive(Clone, Copy, Debug)]
+pub struct NearestRays8<'a> {
+    /// The common origin.
+    pub o: Vec3,
+    /// Directions (t is in their units).
+    pub d: &'a [Vec3; 8],
+    /// Start of each ray's range.
+    pub tmin: &'a [f32; 8],
+    /// End of each ray's range.
+    pub tmax: &'a [f32; 8],
+    /// How far past its nearest crossing each ray's walk keeps collecting.
+    pub slack: &'a [f32; 8],
+}
+
 /// Per-ray constants of the conservative slab test.
 #[derive(Clone, Copy)]
 struct RayBox {
@@ -1221,14 +1237,9 @@ impl MeshData {
     /// same projection axes need is tested a triangle at a time against all of
     /// them ([`spans_nearest8_sse`](Self::spans_nearest8_sse) never does; both
     /// give the same answers).
-    #[allow(clippy::too_many_arguments)]
     pub fn spans_nearest8(
         &self,
-        o: Vec3,
-        d: &[Vec3; 8],
-        tmin: &[f32; 8],
-        tmax: &[f32; 8],
-        slack: &[f32; 8],
+        q: &NearestRays8,
         active: u32,
         leaf: u32,
         out: &mut [Vec<Span>; 8],
@@ -1236,62 +1247,48 @@ impl MeshData {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX.
-            return unsafe { self.spans_nearest8_avx(o, d, tmin, tmax, slack, active, leaf, out) };
+            return unsafe { self.spans_nearest8_avx(q, active, leaf, out) };
         }
-        self.spans_nearest8_in::<false>(o, d, tmin, tmax, slack, active, leaf, out)
+        self.spans_nearest8_in::<false>(q, active, leaf, out)
     }
 
     /// [`spans_nearest8`](Self::spans_nearest8) without the AVX leaf test (what
     /// CPUs without AVX run), for tests: both give the same answers.
     #[doc(hidden)]
-    #[allow(clippy::too_many_arguments)]
     pub fn spans_nearest8_sse(
         &self,
-        o: Vec3,
-        d: &[Vec3; 8],
-        tmin: &[f32; 8],
-        tmax: &[f32; 8],
-        slack: &[f32; 8],
+        q: &NearestRays8,
         active: u32,
         leaf: u32,
         out: &mut [Vec<Span>; 8],
     ) -> (u32, [f32; 8]) {
-        self.spans_nearest8_in::<false>(o, d, tmin, tmax, slack, active, leaf, out)
+        self.spans_nearest8_in::<false>(q, active, leaf, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    #[allow(clippy::too_many_arguments)]
     unsafe fn spans_nearest8_avx(
         &self,
-        o: Vec3,
-        d: &[Vec3; 8],
-        tmin: &[f32; 8],
-        tmax: &[f32; 8],
-        slack: &[f32; 8],
+        q: &NearestRays8,
         active: u32,
         leaf: u32,
         out: &mut [Vec<Span>; 8],
     ) -> (u32, [f32; 8]) {
-        self.spans_nearest8_in::<true>(o, d, tmin, tmax, slack, active, leaf, out)
+        self.spans_nearest8_in::<true>(q, active, leaf, out)
     }
 
     /// The packet walk; with `AVX` (only instantiated inside a function compiled
     /// with AVX) a leaf that three or more rays sharing their projection axes
     /// need is tested one triangle at a time against all of them.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn spans_nearest8_in<const AVX: bool>(
         &self,
-        o: Vec3,
-        d: &[Vec3; 8],
-        tmin: &[f32; 8],
-        tmax: &[f32; 8],
-        slack: &[f32; 8],
+        q: &NearestRays8,
         mut active: u32,
         leaf: u32,
         out: &mut [Vec<Span>; 8],
     ) -> (u32, [f32; 8]) {
+        let NearestRays8 { o, d, tmin, tmax, slack } = *q;
         let mut cut = [f32::INFINITY; 8];
         if self.wide.is_empty() || self.rule != InsideRule::Orientation {
             return (0, cut);

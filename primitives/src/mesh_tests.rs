@@ -684,11 +684,12 @@ fn mesh_spans_nearest8_matches_single_rays() {
             let slack: [f32; 8] = std::array::from_fn(|k| if k == 2 { 0.0 } else { 1e-4 * k as f32 });
             let active = if i % 13 == 0 { 0b1011_0110 } else { 0xff };
             let mut out: [Vec<Span>; 8] = Default::default();
-            let (done, cut) = m.spans_nearest8(o, &d, &tmin, &tmax, &slack, active, 7, &mut out);
+            let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack };
+            let (done, cut) = m.spans_nearest8(&q, active, 7, &mut out);
             assert_eq!(done & !active, 0, "{name}: bundle {i}: a ray outside the active set was traced");
             // The SSE2 walk (machines without AVX: every leaf ray by ray) agrees exactly.
             let mut out_sse: [Vec<Span>; 8] = Default::default();
-            let sse = m.spans_nearest8_sse(o, &d, &tmin, &tmax, &slack, active, 7, &mut out_sse);
+            let sse = m.spans_nearest8_sse(&q, active, 7, &mut out_sse);
             assert_eq!((sse.0, sse.1.map(f32::to_bits)), (done, cut.map(f32::to_bits)), "{name}: bundle {i}: SSE2 walk");
             assert_eq!(out_sse, out, "{name}: bundle {i}: SSE2 walk spans");
             let is_narrow = i % 3 != 0 && i % 11 != 0 && active == 0xff;

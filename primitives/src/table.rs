@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec4};
 
-use crate::{aabb::Aabb, gcyl::GenCylData, kernels, mesh::MeshData, sweep::SweptSphereData, Span, SpanSink, Surf};
+use crate::{aabb::Aabb, gcyl::GenCylData, kernels, mesh::{MeshData, NearestRays8}, sweep::SweptSphereData, Span, SpanSink, Surf};
 
 /// Ball.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -536,25 +536,15 @@ impl LeafTable {
     /// as one packet ([`MeshData::spans_nearest8`]). Returns the rays done (their
     /// spans in `out[k]`, exact on `[tmin[k], valid[k]]`) and the `valid` ends;
     /// the others are left to `spans_for`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn mesh_nearest8(
-        &self,
-        i: u32,
-        o: Vec3,
-        d: &[Vec3; 8],
-        tmin: &[f32; 8],
-        tmax: &[f32; 8],
-        slack: &[f32; 8],
-        active: u32,
-        out: &mut [Vec<Span>; 8],
-    ) -> (u32, [f32; 8]) {
+    pub fn mesh_nearest8(&self, i: u32, q: &NearestRays8, active: u32, out: &mut [Vec<Span>; 8]) -> (u32, [f32; 8]) {
         let iu = i as usize;
         if self.kind[iu] != LeafKind::Mesh {
             return (0, [f32::INFINITY; 8]);
         }
         let m = &self.to_local[iu];
-        let dl: [Vec3; 8] = std::array::from_fn(|k| m.transform_vector3(d[k]));
-        self.meshes[self.ext[iu] as usize].spans_nearest8(m.transform_point3(o), &dl, tmin, tmax, slack, active, i, out)
+        let dl: [Vec3; 8] = std::array::from_fn(|k| m.transform_vector3(q.d[k]));
+        let local = NearestRays8 { o: m.transform_point3(q.o), d: &dl, ..*q };
+        self.meshes[self.ext[iu] as usize].spans_nearest8(&local, active, i, out)
     }
 
     /// Is the world point inside leaf `i` (boundary included)?
