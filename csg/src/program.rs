@@ -179,6 +179,14 @@ impl PacketMemo {
         })
     }
 
+    /// Lane `k`'s recorded spans of `leaf` (on its whole query range) and where
+    /// they stop being exact, when that lane is done.
+    #[inline]
+    pub fn lane(&self, k: usize, leaf: u32) -> Option<(&[Span], f32)> {
+        let e = self.leaves[..self.len].iter().find(|e| e.leaf == leaf)?;
+        (e.done & (1 << k) != 0).then(|| (e.spans[k].as_slice(), e.valid[k]))
+    }
+
     /// Lane `k`'s spans of `leaf` on `[lo, hi]` and where they stop being exact,
     /// when the recorded query covers that range (`None`: ask the leaf).
     #[inline]

@@ -175,6 +175,66 @@ pub struct RenderScene {
     /// Per object, the length past an unsure nearest-mode result that its full
     /// redo tries first (a tenth of its size when it holds a mesh; 0: none).
     redo_window: Vec<f32>,
+    /// The packet shortcut (see [`Shortcut`]), for scenes with few leaves.
+    shortcut: Option<Shortcut>,
+}
+
+/// At most this many leaves besides the packet meshes for the packet shortcut.
+const SHORTCUT_LEAVES: usize = 8;
+
+/// Per packet ray, the CSG evaluation reduced to what is already known: when
+/// every leaf other than the packet meshes has its box beyond the nearest
+/// packet-mesh entry `t` (and every other packet mesh is known empty there too),
+/// every leaf but that mesh is empty on `[tmin, t + margin]`. Roth's operations
+/// act pointwise (fusing and short-span rules reach only a few eps), so each
+/// object's diagram there is its tree with those leaves empty: the mesh's own
+/// object, when its tree then reduces to the mesh alone ([`reduce_to_leaf`]),
+/// begins with the mesh's entry at `t`, and the other objects are empty. That
+/// entry is the nearest hit, without evaluating anything.
+struct Shortcut {
+    /// World boxes of the leaves that are not packet meshes.
+    others: Vec<Aabb>,
+    /// Per packet mesh (as in `packet_meshes`): the object whose tree is that
+    /// mesh alone when every other leaf is empty, or `u32::MAX`.
+    owner: Vec<u32>,
+}
+
+/// What node `n` becomes when every leaf but `keep` is empty.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reduced {
+    Empty,
+    Keep,
+    /// Anything else (`keep` combined with itself).
+    Other,
+}
+
+fn reduce_to_leaf(program: &Program, n: u32, keep: u32) -> Reduced {
+    let nu = n as usize;
+    let first = program.first[nu] as usize;
+    if program.kind[nu] == NodeKind::Leaf {
+        return if first as u32 == keep { Reduced::Keep } else { Reduced::Empty };
+    }
+    let ch = &program.children[first..first + program.count[nu] as usize];
+    let red = |c: &u32| reduce_to_leaf(program, *c, keep);
+    let one = |mut it: std::vec::IntoIter<Reduced>| match (it.next(), it.next()) {
+        (None, _) => Reduced::Empty,
+        (Some(r), None) => r,
+        _ => Reduced::Other,
+    };
+    match program.kind[nu] {
+        NodeKind::Leaf => unreachable!(),
+        NodeKind::Union => one(ch.iter().map(red).filter(|&r| r != Reduced::Empty).collect::<Vec<_>>().into_iter()),
+        NodeKind::Intersection => {
+            let rs: Vec<Reduced> = ch.iter().map(red).collect();
+            if rs.is_empty() || rs.contains(&Reduced::Empty) { Reduced::Empty } else { one(rs.into_iter()) }
+        }
+        NodeKind::Difference => match ch.first().map(red) {
+            None | Some(Reduced::Empty) => Reduced::Empty,
+            Some(r) => {
+                if ch[1..].iter().map(red).all(|s| s == Reduced::Empty) { r } else { Reduced::Other }
+            }
+        },
+    }
 }
 
 /// At most this many mesh leaves are traced ahead per packet; scenes with more
@@ -187,6 +247,8 @@ pub struct PacketScratch {
     /// The single-ray scratch (also for shading).
     pub scratch: Scratch,
     memo: PacketMemo,
+    /// Rays answered by the packet shortcut so far (for tests).
+    pub shortcuts: u64,
 }
 
 /// The mesh leaves of `roots` that a nearest-hit evaluation queries in nearest
@@ -549,6 +611,21 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
             c.into_iter().find(|l| pm.contains(l))
         })
         .collect();
+    scene.shortcut = if pm.is_empty() || scene.leaves.len() > pm.len() + SHORTCUT_LEAVES {
+        None
+    } else {
+        let others: Vec<Aabb> =
+            (0..scene.leaves.len() as u32).filter(|l| !pm.contains(l)).map(|l| scene.leaves.bounds[l as usize]).collect();
+        let owner: Vec<u32> = pm
+            .iter()
+            .map(|&m| {
+                let oi = scene.leaf_info[m as usize].object;
+                let keep = reduce_to_leaf(&scene.program, scene.objects[oi as usize].root, m) == Reduced::Keep;
+                if keep { oi } else { u32::MAX }
+            })
+            .collect();
+        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, owner })
+    };
     scene.packet_meshes = pm;
     scene.redo_window = scene
         .objects
@@ -696,6 +773,13 @@ impl RenderScene {
                     continue;
                 }
             }
+            if let Some(sc) = &self.shortcut {
+                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], &ps.memo, k) {
+                    out[k] = h;
+                    ps.shortcuts += 1;
+                    continue;
+                }
+            }
             out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch);
         }
     }
@@ -728,12 +812,67 @@ impl RenderScene {
             best_t
         });
         let (oi, s) = best?;
+        Some(self.hit_at(ray, oi, best_t, s))
+    }
+
+    /// The hit of object `oi` at `t` on surface `s` (its normal made).
+    #[inline]
+    fn hit_at(&self, ray: &Ray, oi: u32, t: f32, s: Surf) -> Hit {
         let leaf = s.leaf_index();
-        let mut n = self.leaves.normal(leaf, s.sub, ray.origin, ray.dir, best_t);
+        let mut n = self.leaves.normal(leaf, s.sub, ray.origin, ray.dir, t);
         if s.flipped() {
             n = -n;
         }
-        Some(Hit { t: best_t, normal: n, object: oi, leaf, sub: s.sub })
+        Hit { t, normal: n, object: oi, leaf, sub: s.sub }
+    }
+
+    /// The nearest hit of packet lane `k` by the [`Shortcut`], when it applies
+    /// (`Some(None)`: no hit at all, every leaf is empty on the ray's range).
+    #[inline]
+    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize) -> Option<Option<Hit>> {
+        // The nearest packet-mesh entry, and up to where each mesh is known empty.
+        let mut best: Option<(f32, Surf, usize)> = None;
+        let mut clear = [f32::INFINITY; PACKET_MESHES];
+        for (j, &m) in self.packet_meshes.iter().enumerate() {
+            let (spans, valid) = memo.lane(k, m)?;
+            match spans.first() {
+                // Inside at `tmin`: the shortcut does not reason about that.
+                Some(s) if !s.s0.is_real() => return None,
+                Some(s) => {
+                    clear[j] = s.t0;
+                    if best.is_none_or(|b| s.t0 < b.0) {
+                        best = Some((s.t0, s.s0, j));
+                    }
+                }
+                None if valid < ray.tmax => clear[j] = valid,
+                None => {}
+            }
+        }
+        // Everything else must be empty on [tmin, reach]: 16 eps past the entry
+        // (as for the redo window: what lies further cannot fuse with it or cut
+        // it short), or the whole range when there is no entry.
+        let (reach, j_best) = match best {
+            Some((t, _, j)) => (t + 16.0 * ctx.eps, j),
+            None => (ray.tmax, usize::MAX),
+        };
+        for (j, &c) in clear[..self.packet_meshes.len()].iter().enumerate() {
+            if j != j_best && c <= reach {
+                return None;
+            }
+        }
+        for b in &sc.others {
+            if let Some((t0, _)) = b.ray_range(ctx.o, ctx.inv_d, ray.tmin, ray.tmax) {
+                if t0 <= reach {
+                    return None;
+                }
+            }
+        }
+        let Some((t, s, j)) = best else { return Some(None) };
+        let oi = sc.owner[j];
+        if oi == u32::MAX {
+            return None;
+        }
+        Some(Some(self.hit_at(ray, oi, t, s)))
     }
 
     /// Any-hit with caller-provided scratch.
