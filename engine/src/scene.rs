@@ -184,7 +184,8 @@ const SHORTCUT_LEAVES: usize = 8;
 
 /// Per packet ray, the CSG evaluation reduced to what is already known: when
 /// every leaf other than the packet meshes has its box beyond the nearest
-/// packet-mesh entry `t` (and every other packet mesh is known empty there too),
+/// packet-mesh entry `t` or (a cheap analytic leaf) no span before it, and every
+/// other packet mesh is known empty there too,
 /// every leaf but that mesh is empty on `[tmin, t + margin]`. Roth's operations
 /// act pointwise (fusing and short-span rules reach only a few eps), so each
 /// object's diagram there is its tree with those leaves empty: the mesh's own
@@ -194,9 +195,23 @@ const SHORTCUT_LEAVES: usize = 8;
 struct Shortcut {
     /// World boxes of the leaves that are not packet meshes.
     others: Vec<Aabb>,
+    /// Their leaf indices, `u32::MAX` for those whose own query is costly (a
+    /// ray meeting such a box before the entry goes the full way): the others
+    /// are asked for their spans up to the entry.
+    exact: Vec<u32>,
     /// Per packet mesh (as in `packet_meshes`): the object whose tree is that
     /// mesh alone when every other leaf is empty, or `u32::MAX`.
     owner: Vec<u32>,
+}
+
+/// A span sink that only notes whether anything came.
+struct Found(bool);
+
+impl rothray_primitives::SpanSink for Found {
+    #[inline]
+    fn push_span(&mut self, _: Span) {
+        self.0 = true;
+    }
 }
 
 /// What node `n` becomes when every leaf but `keep` is empty.
@@ -614,8 +629,16 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     scene.shortcut = if pm.is_empty() || scene.leaves.len() > pm.len() + SHORTCUT_LEAVES {
         None
     } else {
-        let others: Vec<Aabb> =
-            (0..scene.leaves.len() as u32).filter(|l| !pm.contains(l)).map(|l| scene.leaves.bounds[l as usize]).collect();
+        let rest: Vec<u32> = (0..scene.leaves.len() as u32).filter(|l| !pm.contains(l)).collect();
+        let others: Vec<Aabb> = rest.iter().map(|&l| scene.leaves.bounds[l as usize]).collect();
+        let exact: Vec<u32> = rest
+            .iter()
+            .map(|&l| {
+                use rothray_primitives::table::LeafKind::*;
+                let cheap = matches!(scene.leaves.kind[l as usize], Sphere | Cuboid | Cylinder | Cone | HalfSpace);
+                if cheap { l } else { u32::MAX }
+            })
+            .collect();
         let owner: Vec<u32> = pm
             .iter()
             .map(|&m| {
@@ -624,7 +647,7 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
                 if keep { oi } else { u32::MAX }
             })
             .collect();
-        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, owner })
+        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner })
     };
     scene.packet_meshes = pm;
     scene.redo_window = scene
@@ -860,10 +883,17 @@ impl RenderScene {
                 return None;
             }
         }
-        for b in &sc.others {
+        for (b, &l) in sc.others.iter().zip(&sc.exact) {
             if let Some((t0, _)) = b.ray_range(ctx.o, ctx.inv_d, ray.tmin, ray.tmax) {
                 if t0 <= reach {
-                    return None;
+                    // The box reaches the entry: does the leaf itself?
+                    let mut found = Found(false);
+                    if l != u32::MAX {
+                        self.leaves.spans(l, ctx.o, ctx.d, ray.tmin, reach, &mut found);
+                    }
+                    if l == u32::MAX || found.0 {
+                        return None;
+                    }
                 }
             }
         }
