@@ -265,6 +265,8 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
         }
     };
     let bg8 = encode(bg);
+    // Only lights and the normal picture read a hit's normal.
+    let normals = s.aov == Aov::Normal || (s.aov == Aov::Shaded && !s.lights.is_empty());
     // Tiles whose pyramid of rays misses every object's bounds are background: no
     // ray is traced. Objects are tested one by one when there are few of them
     // (scenes/sampler: three objects spread over the picture), else the scene box.
@@ -334,7 +336,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                             let rs = rays.ray8(&fx, &fy);
                             let rs = &rs[..np];
                             let mut hits = [None; 8];
-                            scene.intersect_packet(rs, ps, &mut hits);
+                            scene.intersect_packet_with(rs, ps, &mut hits, normals);
                             for k in 0..rs.len() {
                                 let smp = shade(scene, s, &rs[k], hits[k], &mut ps.scratch, &mut shadows);
                                 acc[k] += smp.rgb;

@@ -752,7 +752,7 @@ impl RenderScene {
             return None;
         }
         let ctx = self.ray_ctx(ray.origin, ray.dir);
-        self.intersect_ctx(ray, &ctx, scratch)
+        self.intersect_ctx(ray, &ctx, scratch, true)
     }
 
     /// Nearest hits of up to eight rays (`out[k]` for `rays[k]`), the same as
@@ -762,6 +762,14 @@ impl RenderScene {
     /// ([`LeafTable::mesh_nearest8`]), then each ray's CSG is evaluated with
     /// those results.
     pub fn intersect_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>]) {
+        self.intersect_packet_with(rays, ps, out, true);
+    }
+
+    /// [`RenderScene::intersect_packet`]; without `normals` every hit's `normal`
+    /// is left zero (a picture without lights does not read it: the normal of
+    /// a mesh triangle was ~6% of a frame of scenes/bunny).
+    #[doc(hidden)]
+    pub fn intersect_packet_with(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool) {
         let n = rays.len().min(out.len());
         if n == 0 {
             return;
@@ -770,7 +778,11 @@ impl RenderScene {
         let packet = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| r.is_valid() && r.origin == o);
         if !packet {
             for k in 0..n {
-                out[k] = self.intersect_with(&rays[k], &mut ps.scratch);
+                out[k] = if rays[k].is_valid() {
+                    self.intersect_ctx(&rays[k], &self.ray_ctx(rays[k].origin, rays[k].dir), &mut ps.scratch, normals)
+                } else {
+                    None
+                };
             }
             return;
         }
@@ -797,13 +809,13 @@ impl RenderScene {
                 }
             }
             if let Some(sc) = &self.shortcut {
-                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], &ps.memo, k) {
+                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], &ps.memo, k, normals) {
                     out[k] = h;
                     ps.shortcuts += 1;
                     continue;
                 }
             }
-            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch);
+            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch, normals);
         }
     }
 
@@ -814,7 +826,7 @@ impl RenderScene {
         !self.packet_meshes.is_empty() && self.packet_cover.is_some()
     }
 
-    fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch) -> Option<Hit> {
+    fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch, normals: bool) -> Option<Hit> {
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
         for &oi in &self.unbounded {
@@ -835,16 +847,20 @@ impl RenderScene {
             best_t
         });
         let (oi, s) = best?;
-        Some(self.hit_at(ray, oi, best_t, s))
+        Some(self.hit_at(ray, oi, best_t, s, normals))
     }
 
-    /// The hit of object `oi` at `t` on surface `s` (its normal made).
+    /// The hit of object `oi` at `t` on surface `s` (its normal made when
+    /// `normals`, else zero).
     #[inline]
-    fn hit_at(&self, ray: &Ray, oi: u32, t: f32, s: Surf) -> Hit {
+    fn hit_at(&self, ray: &Ray, oi: u32, t: f32, s: Surf, normals: bool) -> Hit {
         let leaf = s.leaf_index();
-        let mut n = self.leaves.normal(leaf, s.sub, ray.origin, ray.dir, t);
-        if s.flipped() {
-            n = -n;
+        let mut n = Vec3::ZERO;
+        if normals {
+            n = self.leaves.normal(leaf, s.sub, ray.origin, ray.dir, t);
+            if s.flipped() {
+                n = -n;
+            }
         }
         Hit { t, normal: n, object: oi, leaf, sub: s.sub }
     }
@@ -852,7 +868,8 @@ impl RenderScene {
     /// The nearest hit of packet lane `k` by the [`Shortcut`], when it applies
     /// (`Some(None)`: no hit at all, every leaf is empty on the ray's range).
     #[inline]
-    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize) -> Option<Option<Hit>> {
+    #[allow(clippy::too_many_arguments)]
+    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize, normals: bool) -> Option<Option<Hit>> {
         // The nearest packet-mesh entry, and up to where each mesh is known empty.
         let mut best: Option<(f32, Surf, usize)> = None;
         let mut clear = [f32::INFINITY; PACKET_MESHES];
@@ -902,7 +919,7 @@ impl RenderScene {
         if oi == u32::MAX {
             return None;
         }
-        Some(Some(self.hit_at(ray, oi, t, s)))
+        Some(Some(self.hit_at(ray, oi, t, s, normals)))
     }
 
     /// Any-hit with caller-provided scratch.
