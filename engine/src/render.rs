@@ -182,8 +182,11 @@ fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, s
         Aov::Depth => Vec3::ZERO,
         Aov::Shaded => {
             let base = scene.leaf_info[h.leaf as usize].color;
-            let p = ray.origin + ray.dir * h.t;
             let mut acc = Vec3::splat(s.ambient);
+            if s.lights.is_empty() {
+                return Sample { rgb: base * acc, depth: h.t };
+            }
+            let p = ray.origin + ray.dir * h.t;
             let off = (scene.eps * 20.0).max(1e-4 * (1.0 + p.abs().max_element()));
             for l in &s.lights {
                 let to_l = -l.direction.normalize_or_zero();
@@ -315,6 +318,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                         let px = &px[..np];
                         let mut acc = [Vec3::ZERO; 8];
                         let mut dmin = [f32::INFINITY; 8];
+                        let mut all_bg = false;
                         for si in 0..spp {
                             // Made by `ray8`, four at a time, not filled one by one
                             // into a template array (reading back the template's
@@ -337,15 +341,32 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                             let rs = &rs[..np];
                             let mut hits = [None; 8];
                             scene.intersect_packet_with(rs, ps, &mut hits, normals);
+                            if spp == 1 && hits.iter().all(Option::is_none) {
+                                // Background only (most packets of a frame): the
+                                // pixels are `bg8`, the depths stay infinite.
+                                all_bg = true;
+                                break;
+                            }
                             for k in 0..rs.len() {
                                 let smp = shade(scene, s, &rs[k], hits[k], &mut ps.scratch, &mut shadows);
                                 acc[k] += smp.rgb;
                                 dmin[k] = dmin[k].min(smp.depth);
                             }
                         }
+                        if all_bg {
+                            if bg8 != [0; 3] {
+                                for &(r, x) in px {
+                                    let i = r * w + x;
+                                    orows[3 * i..3 * i + 3].copy_from_slice(&bg8);
+                                }
+                            }
+                            continue;
+                        }
                         for (k, &(r, x)) in px.iter().enumerate() {
                             let i = r * w + x;
-                            orows[3 * i..3 * i + 3].copy_from_slice(&encode(acc[k] / spp as f32));
+                            // (x / 1 is x: one sample skips the division.)
+                            let c = if spp == 1 { acc[k] } else { acc[k] / spp as f32 };
+                            orows[3 * i..3 * i + 3].copy_from_slice(&encode(c));
                             if let Some(d) = drows.as_deref_mut() {
                                 d[i] = dmin[k];
                             }
