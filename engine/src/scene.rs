@@ -688,8 +688,14 @@ impl RenderScene {
     /// scene, since f32 rounding of the crossings does.
     #[inline]
     pub fn ray_ctx(&self, o: Vec3, d: Vec3) -> RayCtx<'static> {
+        RayCtx::new(o, d, self.eps_at(o))
+    }
+
+    /// The length tolerance of rays from `o` (see [`RenderScene::ray_ctx`]).
+    #[inline]
+    fn eps_at(&self, o: Vec3) -> f32 {
         let far = (o - self.center).length();
-        RayCtx::new(o, d, self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 })
+        self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 }
     }
 
     /// True when every object has finite bounds (no half-space reaches infinity).
@@ -786,27 +792,41 @@ impl RenderScene {
             }
             return;
         }
-        let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(o, rays[k].dir));
+        // What `ray_ctx` gives each ray (the same bits), its origin's share once.
+        let ew = self.eps_at(o);
         let d: [Vec3; 8] = std::array::from_fn(|k| rays[k].dir);
+        let eps: [f32; 8] = std::array::from_fn(|k| ew / d[k].length());
         let tmin: [f32; 8] = std::array::from_fn(|k| rays[k].tmin);
         let tmax: [f32; 8] = std::array::from_fn(|k| rays[k].tmax);
-        let slack: [f32; 8] = std::array::from_fn(|k| ctx[k].nearest_slack());
+        let slack: [f32; 8] = std::array::from_fn(|k| 4.0 * eps[k]);
         ps.memo.clear();
         let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack };
         for &i in &self.packet_meshes {
             ps.memo.add(i, &tmin, &tmax, |sp| self.leaves.mesh_nearest8(i, &q, 0xff, sp));
         }
+        // Rays for which every object lies inside a mesh they miss: no hit. A
+        // packet of such rays only (background) is done.
+        let mut left = 0xffu32;
+        if let Some(cover) = &self.packet_cover {
+            for k in 0..8 {
+                if cover.iter().all(|&l| ps.memo.empty(k, l, tmin[k], tmax[k])) {
+                    out[k] = None;
+                    left &= !(1 << k);
+                }
+            }
+            if left == 0 {
+                return;
+            }
+        }
         // All eight contexts are written before the first is read: reading one
         // just built (its fields written piecewise, read with wider loads) stalls
         // on store forwarding.
-        let ctx: [RayCtx; 8] = std::array::from_fn(|k| ctx[k].with_memo(&ps.memo, k));
+        let memo = &ps.memo;
+        let ctx: [RayCtx; 8] =
+            std::array::from_fn(|k| RayCtx { o, d: d[k], inv_d: d[k].recip(), eps: eps[k], memo: Some((memo, k)) });
         for k in 0..8 {
-            if let Some(cover) = &self.packet_cover {
-                // Every object lies inside a mesh this ray misses: no hit.
-                if cover.iter().all(|&l| ps.memo.empty(k, l, tmin[k], tmax[k])) {
-                    out[k] = None;
-                    continue;
-                }
+            if left & (1 << k) == 0 {
+                continue;
             }
             if let Some(sc) = &self.shortcut {
                 if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], &ps.memo, k, normals) {
