@@ -139,7 +139,7 @@ fn random_csg_with_meshes_packets_match_single_rays() {
     // packet path skips their evaluation when they miss those meshes.
     let (mut covered_scenes, mut covered_misses) = (0, 0);
     // Rays the packet shortcut answered without evaluating (scenes with few leaves).
-    let mut shortcuts = 0;
+    let (mut shortcuts, mut redos) = (0, 0);
     for case in 0..150 {
         let mut trees = vec![random_tree_with(&mut rng, 3, true)];
         if case % 3 == 0 {
@@ -179,11 +179,12 @@ fn random_csg_with_meshes_packets_match_single_rays() {
             }
         }
         shortcuts += ps.shortcuts;
+        redos += ps.redos;
     }
     println!("{rays} rays in packets, {hits} hits, {packed_scenes} scenes with meshes");
     println!("{covered_scenes} scenes inside packet meshes, {covered_misses} missing rays there");
-    println!("{shortcuts} rays answered by the packet shortcut");
-    assert!(hits > 1000 && packed_scenes > 70 && covered_misses > 500 && shortcuts > 500);
+    println!("{shortcuts} rays answered by the packet shortcut, {redos} sent straight to a redo");
+    assert!(hits > 1000 && packed_scenes > 70 && covered_misses > 500 && shortcuts > 500 && redos > 50);
 }
 
 #[test]
@@ -230,6 +231,6 @@ fn bitten_mesh_packets_match_single_rays() {
             }
         }
     }
-    println!("{rays} rays, {hits} hits, {} by the packet shortcut (two queries per ray)", ps.shortcuts);
-    assert!(hits > 10_000 && ps.shortcuts > 10_000);
+    println!("{rays} rays, {hits} hits, {} by the packet shortcut, {} sent straight to a redo (two queries per ray)", ps.shortcuts, ps.redos);
+    assert!(hits > 10_000 && ps.shortcuts > 10_000 && ps.redos > 500);
 }

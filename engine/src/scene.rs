@@ -202,15 +202,49 @@ struct Shortcut {
     /// Per packet mesh (as in `packet_meshes`): the object whose tree is that
     /// mesh alone when every other leaf is empty, or `u32::MAX`.
     owner: Vec<u32>,
+    /// Per packet mesh, its object.
+    object: Vec<u32>,
+    /// Per other leaf: is it subtracted (under an odd number of subtrahend
+    /// positions)? One that covers the mesh's entry then most likely cuts it
+    /// away: the ray goes straight to the redo ([`Quick::Redo`]).
+    subtracted: Vec<bool>,
 }
 
-/// A span sink that only notes whether anything came.
-struct Found(bool);
+/// What the packet shortcut found for a ray.
+enum Quick {
+    /// The answer.
+    Answer(Option<Hit>),
+    /// Object `.0` is best evaluated from its redo at `.1` (see
+    /// [`RenderScene::object_first_from`]).
+    Redo(u32, f32),
+    /// Evaluate as usual.
+    Eval,
+}
 
-impl rothray_primitives::SpanSink for Found {
+/// Per leaf, whether it lies under an odd number of subtrahend positions of
+/// its tree (marks `out[leaf]`).
+fn mark_subtracted(program: &Program, n: u32, odd: bool, out: &mut [bool]) {
+    let nu = n as usize;
+    let first = program.first[nu] as usize;
+    match program.kind[nu] {
+        NodeKind::Leaf => out[first] = odd,
+        kind => {
+            for (i, &c) in program.children[first..first + program.count[nu] as usize].iter().enumerate() {
+                mark_subtracted(program, c, odd ^ (kind == NodeKind::Difference && i > 0), out);
+            }
+        }
+    }
+}
+
+/// A span sink that keeps only the first span.
+struct First(Option<Span>);
+
+impl rothray_primitives::SpanSink for First {
     #[inline]
-    fn push_span(&mut self, _: Span) {
-        self.0 = true;
+    fn push_span(&mut self, s: Span) {
+        if self.0.is_none() {
+            self.0 = Some(s);
+        }
     }
 }
 
@@ -264,6 +298,8 @@ pub struct PacketScratch {
     memo: PacketMemo,
     /// Rays answered by the packet shortcut so far (for tests).
     pub shortcuts: u64,
+    /// Rays the packet shortcut sent straight to a redo so far (for tests).
+    pub redos: u64,
 }
 
 /// The mesh leaves of `roots` that a nearest-hit evaluation queries in nearest
@@ -647,7 +683,13 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
                 if keep { oi } else { u32::MAX }
             })
             .collect();
-        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner })
+        let object: Vec<u32> = pm.iter().map(|&m| scene.leaf_info[m as usize].object).collect();
+        let mut sub = vec![false; scene.leaves.len()];
+        for o in &scene.objects {
+            mark_subtracted(&scene.program, o.root, false, &mut sub);
+        }
+        let subtracted: Vec<bool> = rest.iter().map(|&l| sub[l as usize]).collect();
+        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner, object, subtracted })
     };
     scene.packet_meshes = pm;
     scene.redo_window = scene
@@ -721,9 +763,23 @@ impl RenderScene {
     /// First surface of object `oi` within `[tmin, tmax]`: `(t, surface)`.
     #[inline]
     fn object_first(&self, oi: u32, ctx: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) -> Option<(f32, Surf)> {
+        self.object_first_from(oi, ctx, tmin, tmax, None, scratch)
+    }
+
+    /// [`RenderScene::object_first`]; with `redo_at` (before `tmax`) it goes
+    /// straight to the redo as if the nearest-mode evaluation had found nothing
+    /// sure before there (a guess that it would: every path gives the exact
+    /// answer).
+    #[inline]
+    fn object_first_from(&self, oi: u32, ctx: &RayCtx, tmin: f32, tmax: f32, redo_at: Option<f32>, scratch: &mut Scratch) -> Option<(f32, Surf)> {
         let root = self.objects[oi as usize].root;
-        let valid = self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
-        let f = first_surface(scratch.out.as_slice());
+        let (f, valid) = match redo_at {
+            Some(v) if v < tmax => (None, v),
+            _ => {
+                let valid = self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
+                (first_surface(scratch.out.as_slice()), valid)
+            }
+        };
         if f.is_none() && valid < tmax {
             // Nothing sure before `valid` (a union's entry covered by another
             // operand, a mesh's first span cut away by a difference): redo in
@@ -828,14 +884,22 @@ impl RenderScene {
             if left & (1 << k) == 0 {
                 continue;
             }
+            let mut redo = None;
             if let Some(sc) = &self.shortcut {
-                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], &ps.memo, k, normals) {
-                    out[k] = h;
-                    ps.shortcuts += 1;
-                    continue;
+                match self.shortcut_hit(sc, &rays[k], &ctx[k], memo, k, normals) {
+                    Quick::Answer(h) => {
+                        out[k] = h;
+                        ps.shortcuts += 1;
+                        continue;
+                    }
+                    Quick::Redo(oi, at) => {
+                        redo = Some((oi, at));
+                        ps.redos += 1;
+                    }
+                    Quick::Eval => {}
                 }
             }
-            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch, normals);
+            out[k] = self.intersect_ctx_redo(&rays[k], &ctx[k], &mut ps.scratch, normals, redo);
         }
     }
 
@@ -847,10 +911,17 @@ impl RenderScene {
     }
 
     fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch, normals: bool) -> Option<Hit> {
+        self.intersect_ctx_redo(ray, ctx, scratch, normals, None)
+    }
+
+    /// [`RenderScene::intersect_ctx`], with object `redo.0` going straight to its
+    /// redo at `redo.1` ([`RenderScene::object_first_from`]).
+    fn intersect_ctx_redo(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch, normals: bool, redo: Option<(u32, f32)>) -> Option<Hit> {
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
+        let redo_at = |oi: u32| redo.and_then(|(o, v)| (o == oi).then_some(v));
         for &oi in &self.unbounded {
-            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
+            if let Some((t, s)) = self.object_first_from(oi, ctx, ray.tmin, best_t, redo_at(oi), scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -858,7 +929,7 @@ impl RenderScene {
             }
         }
         self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, best_t, |oi, _| {
-            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
+            if let Some((t, s)) = self.object_first_from(oi, ctx, ray.tmin, best_t, redo_at(oi), scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -889,19 +960,19 @@ impl RenderScene {
     /// (`Some(None)`: no hit at all, every leaf is empty on the ray's range).
     #[inline]
     #[allow(clippy::too_many_arguments)]
-    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize, normals: bool) -> Option<Option<Hit>> {
+    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize, normals: bool) -> Quick {
         // The nearest packet-mesh entry, and up to where each mesh is known empty.
-        let mut best: Option<(f32, Surf, usize)> = None;
+        let mut best: Option<(f32, Surf, usize, f32)> = None;
         let mut clear = [f32::INFINITY; PACKET_MESHES];
         for (j, &m) in self.packet_meshes.iter().enumerate() {
-            let (spans, valid) = memo.lane(k, m)?;
+            let Some((spans, valid)) = memo.lane(k, m) else { return Quick::Eval };
             match spans.first() {
                 // Inside at `tmin`: the shortcut does not reason about that.
-                Some(s) if !s.s0.is_real() => return None,
+                Some(s) if !s.s0.is_real() => return Quick::Eval,
                 Some(s) => {
                     clear[j] = s.t0;
                     if best.is_none_or(|b| s.t0 < b.0) {
-                        best = Some((s.t0, s.s0, j));
+                        best = Some((s.t0, s.s0, j, valid));
                     }
                 }
                 None if valid < ray.tmax => clear[j] = valid,
@@ -912,34 +983,40 @@ impl RenderScene {
         // (as for the redo window: what lies further cannot fuse with it or cut
         // it short), or the whole range when there is no entry.
         let (reach, j_best) = match best {
-            Some((t, _, j)) => (t + 16.0 * ctx.eps, j),
+            Some((t, _, j, _)) => (t + 16.0 * ctx.eps, j),
             None => (ray.tmax, usize::MAX),
         };
         for (j, &c) in clear[..self.packet_meshes.len()].iter().enumerate() {
             if j != j_best && c <= reach {
-                return None;
+                return Quick::Eval;
             }
         }
-        for (b, &l) in sc.others.iter().zip(&sc.exact) {
+        for (i, (b, &l)) in sc.others.iter().zip(&sc.exact).enumerate() {
             if let Some((t0, _)) = b.ray_range(ctx.o, ctx.inv_d, ray.tmin, ray.tmax) {
                 if t0 <= reach {
                     // The box reaches the entry: does the leaf itself?
-                    let mut found = Found(false);
-                    if l != u32::MAX {
-                        self.leaves.spans(l, ctx.o, ctx.d, ray.tmin, reach, &mut found);
+                    if l == u32::MAX {
+                        return Quick::Eval;
                     }
-                    if l == u32::MAX || found.0 {
-                        return None;
+                    let mut first = First(None);
+                    self.leaves.spans(l, ctx.o, ctx.d, ray.tmin, reach, &mut first);
+                    if let Some(f) = first.0 {
+                        return match best {
+                            // A subtracted leaf over the whole start of the mesh's
+                            // span: the nearest-mode evaluation would find nothing.
+                            Some((t, _, j, valid)) if sc.subtracted[i] && f.t0 <= t && f.t1 >= reach => Quick::Redo(sc.object[j], valid),
+                            _ => Quick::Eval,
+                        };
                     }
                 }
             }
         }
-        let Some((t, s, j)) = best else { return Some(None) };
+        let Some((t, s, j, _)) = best else { return Quick::Answer(None) };
         let oi = sc.owner[j];
         if oi == u32::MAX {
-            return None;
+            return Quick::Eval;
         }
-        Some(Some(self.hit_at(ray, oi, t, s, normals)))
+        Quick::Answer(Some(self.hit_at(ray, oi, t, s, normals)))
     }
 
     /// Any-hit with caller-provided scratch.
