@@ -1310,8 +1310,12 @@ impl MeshData {
             }
         }
         // The packet's pruning bound: the largest cut among its rays.
+        // Branch-free (a select per lane, then a tree of maxima): the filtered
+        // fold it replaces was ~2% of this walk's samples.
         let far = |cut: &[f32; 8], active: u32| {
-            cut.iter().enumerate().filter(|(k, _)| active & (1 << k) != 0).fold(f32::NEG_INFINITY, |f, (_, &c)| f.max(c))
+            let c: [f32; 8] = std::array::from_fn(|k| if active & (1 << k) != 0 { cut[k] } else { f32::NEG_INFINITY });
+            let m4 = [c[0].max(c[4]), c[1].max(c[5]), c[2].max(c[6]), c[3].max(c[7])];
+            m4[0].max(m4[2]).max(m4[1].max(m4[3]))
         };
         let mut thi = far(&cut, active);
         // Most packets of a frame miss the mesh: no ray meets any box of the root
