@@ -208,24 +208,29 @@ fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, s
 
 const TILE_W: usize = 16;
 
-/// Does the pyramid from the eye through the pixel rectangle `[x0, x1] x [y0, y1]`
-/// touch the box? Conservative: four planes through the eye, p-vertex test.
-fn frustum_touches(rays: &CameraRays, x0: f32, y0: f32, x1: f32, y1: f32, b: &rothray_primitives::Aabb) -> bool {
-    let eye = rays.eye;
-    let c = [rays.ray(x0, y0).dir, rays.ray(x1, y0).dir, rays.ray(x1, y1).dir, rays.ray(x0, y1).dir];
-    let mid = (c[0] + c[1] + c[2] + c[3]).normalize();
-    // The plane through the eye facing the view: without it a box behind the camera
-    // passes the four side planes, each with its own corner (the four half-spaces
-    // alone do exclude it, but the p-vertex test checks them one at a time).
-    let pf = Vec3::select(rays.fwd.cmpge(Vec3::ZERO), b.max, b.min);
-    if rays.fwd.dot(pf - eye) < -1e-6 * (1.0 + (pf - eye).length()) {
-        return false;
+/// The planes through the eye that bound tiles: every ray through image column
+/// `x` lies in one plane, every ray through row `y` in another. Unit normals,
+/// facing increasing x (`col`) and decreasing y (`row`, up the picture).
+impl CameraRays {
+    fn col_plane(&self, x: f32) -> Vec3 {
+        let u = 2.0 * x / self.w - 1.0;
+        (self.fwd + self.right * u).cross(self.up).normalize_or_zero()
     }
-    for i in 0..4 {
-        let mut n = c[i].cross(c[(i + 1) % 4]);
-        if n.dot(mid) < 0.0 {
-            n = -n;
-        }
+
+    fn row_plane(&self, y: f32) -> Vec3 {
+        let v = 1.0 - 2.0 * y / self.h;
+        self.right.cross(self.fwd + self.up * v).normalize_or_zero()
+    }
+}
+
+/// Does the pyramid from the eye between the column planes `left`, `right` and
+/// the row planes `top`, `bottom` ([`CameraRays::col_plane`], `row_plane`)
+/// touch the box? Conservative: a p-vertex test per plane, and the plane
+/// through the eye facing the view (without it a box behind the camera passes
+/// the four side planes, each with its own corner).
+fn pyramid_touches(rays: &CameraRays, left: Vec3, right: Vec3, top: Vec3, bottom: Vec3, b: &rothray_primitives::Aabb) -> bool {
+    let eye = rays.eye;
+    for n in [rays.fwd, left, -right, bottom, -top] {
         // The box corner farthest along n.
         let p = Vec3::select(n.cmpge(Vec3::ZERO), b.max, b.min);
         if n.dot(p - eye) < -1e-6 * (1.0 + (p - eye).length()) {
@@ -279,6 +284,9 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     } else {
         vec![scene.bounds]
     };
+    // The column planes of the tiles' sides (made once: each is shared by two
+    // tiles of every row of tiles).
+    let col_planes: Vec<Vec3> = if cull { (0..=w.div_ceil(TILE_W)).map(|i| rays.col_plane((i * TILE_W).min(w) as f32)).collect() } else { Vec::new() };
     let nchunks = h.div_ceil(ROWS);
     let mut dchunks: Vec<Option<&mut [f32]>> =
         if want_depth { depth.chunks_mut(w * ROWS).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
@@ -288,13 +296,14 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
             let mut shadows = 0u64;
             let y0 = chunk * ROWS;
             let rows_here = orows.len() / (3 * w);
+            let (top, bottom) =
+                if cull { (rays.row_plane(y0 as f32), rays.row_plane((y0 + rows_here) as f32)) } else { (Vec3::ZERO, Vec3::ZERO) };
             for x0 in (0..w).step_by(TILE_W) {
                 let x1 = (x0 + TILE_W).min(w);
-                if cull
-                    && !cull_boxes
-                        .iter()
-                        .any(|b| frustum_touches(&rays, x0 as f32, y0 as f32, x1 as f32, (y0 + rows_here) as f32, b))
-                {
+                if cull && {
+                    let (l, r) = (col_planes[x0 / TILE_W], col_planes[x0 / TILE_W + 1]);
+                    !cull_boxes.iter().any(|b| pyramid_touches(&rays, l, r, top, bottom, b))
+                } {
                     if bg8 != [0; 3] {
                         for r in 0..rows_here {
                             for px in orows[3 * (r * w + x0)..3 * (r * w + x1)].chunks_exact_mut(3) {
