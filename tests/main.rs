@@ -10,3 +10,4 @@ mod csg_oracle;
 mod leaf_oracle;
 mod oracle;
 mod povray;
+mod render_flat;

@@ -31,7 +31,7 @@ pub mod render;
 pub mod scene;
 
 pub use components::*;
-pub use render::{leaf_id_color, render, Aov, Camera, CameraRays, Light, RenderSettings, RenderStats};
+pub use render::{encode_srgb, leaf_id_color, render, Aov, Camera, CameraRays, Light, RenderSettings, RenderStats};
 pub use scene::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError, Hit, LeafInfo, ObjectInfo, PacketScratch, Ray, RenderScene};
 pub use glam;
 pub use hecs;

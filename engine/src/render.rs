@@ -141,6 +141,21 @@ fn srgb(x: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
+/// The sRGB encoding of the shaded picture, through a 4096-entry table (`powf`
+/// per channel was ~0.1 s of a 1920x1080 frame, more than tracing the logo
+/// scene's rays).
+fn srgb_table() -> &'static [u8; 4096] {
+    static LUT: std::sync::OnceLock<[u8; 4096]> = std::sync::OnceLock::new();
+    LUT.get_or_init(|| std::array::from_fn(|i| srgb(i as f32 / 4095.0)))
+}
+
+/// A linear colour as the 8-bit sRGB pixel of the shaded picture.
+pub fn encode_srgb(c: Vec3) -> [u8; 3] {
+    let lut = srgb_table();
+    let q = |x: f32| lut[(x.clamp(0.0, 1.0) * 4095.0 + 0.5) as usize];
+    [q(c.x), q(c.y), q(c.z)]
+}
+
 /// Counters of a render.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RenderStats {
@@ -257,9 +272,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     const ROWS: usize = 4;
     let shadow_total = AtomicUsize::new(0);
     let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
-    // sRGB encoding through a 4096-entry table: `powf` per channel was ~0.1 s of
-    // a 1920x1080 frame (more than tracing the logo scene's rays).
-    let lut: Vec<u8> = if s.aov == Aov::Shaded { (0..4096).map(|i| srgb(i as f32 / 4095.0)).collect() } else { Vec::new() };
+    let lut = srgb_table();
     let encode = |c: Vec3| -> [u8; 3] {
         match s.aov {
             Aov::Shaded => {
@@ -273,6 +286,10 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
         }
     };
     let bg8 = encode(bg);
+    // Flat shading (no lights, one sample): a hit's pixel depends only on its
+    // leaf, encoded once here exactly as `shade` and the loop below would.
+    let flat: Option<Vec<[u8; 3]>> = (s.aov == Aov::Shaded && s.lights.is_empty() && spp == 1)
+        .then(|| scene.leaf_info.iter().map(|li| encode(Vec3::ZERO + li.color * Vec3::splat(s.ambient))).collect());
     // Only lights and the normal picture read a hit's normal.
     let normals = s.aov == Aov::Normal || (s.aov == Aov::Shaded && !s.lights.is_empty());
     // Tiles whose pyramid of rays misses every object's bounds are background: no
@@ -327,7 +344,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                         let px = &px[..np];
                         let mut acc = [Vec3::ZERO; 8];
                         let mut dmin = [f32::INFINITY; 8];
-                        let mut all_bg = false;
+                        let (mut all_bg, mut flat_done) = (false, false);
                         for si in 0..spp {
                             // Made by `ray8`, four at a time, not filled one by one
                             // into a template array (reading back the template's
@@ -356,11 +373,23 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                                 all_bg = true;
                                 break;
                             }
+                            if let Some(flat) = &flat {
+                                for (k, &(r, x)) in px.iter().enumerate() {
+                                    let i = r * w + x;
+                                    let c = hits[k].map_or(bg8, |h| flat[h.leaf as usize]);
+                                    orows[3 * i..3 * i + 3].copy_from_slice(&c);
+                                }
+                                flat_done = true;
+                                break;
+                            }
                             for k in 0..rs.len() {
                                 let smp = shade(scene, s, &rs[k], hits[k], &mut ps.scratch, &mut shadows);
                                 acc[k] += smp.rgb;
                                 dmin[k] = dmin[k].min(smp.depth);
                             }
+                        }
+                        if flat_done {
+                            continue;
                         }
                         if all_bg {
                             if bg8 != [0; 3] {
