@@ -1334,7 +1334,7 @@ impl MeshData {
             return (0, cut);
         }
         // Per-ray constants of the triangle test, made when a ray first reaches a leaf.
-        let mut rays: [MaybeUninit<(WoopRay, wide::TriRay4)>; 8] = [const { MaybeUninit::uninit() }; 8];
+        let mut rays: [MaybeUninit<WoopRay>; 8] = [const { MaybeUninit::uninit() }; 8];
         // Set up on the first leaf: `ready` (the active rays), their shears by
         // axis, whether they share the projection axes `axes`, their starts.
         let mut ready = 0u32;
@@ -1380,7 +1380,9 @@ impl MeshData {
                             Some((c, _)) if c != code => shared = false,
                             _ => {}
                         }
-                        rays[k].write((r, wide::TriRay4::new(&r)));
+                        // The 4-wide test's splatted constants are made where that test runs
+                        // (the AVX test, the common case, does not use them).
+                        rays[k].write(r);
                     }
                     ready = active;
                     axes = k0.map_or([0, 1, 2], |(_, k)| k);
@@ -1399,7 +1401,7 @@ impl MeshData {
                         let k = mm.trailing_zeros() as usize;
                         mm &= mm - 1;
                         // SAFETY: every active lane was written on the first leaf.
-                        let (r, _) = unsafe { rays[k].assume_init_ref() };
+                        let r = unsafe { rays[k].assume_init_ref() };
                         for slot in blk.slots() {
                             if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
                                 xs[k].push(Crossing { t, slot, front });
@@ -1426,8 +1428,8 @@ impl MeshData {
                     let k = mm.trailing_zeros() as usize;
                     mm &= mm - 1;
                     // SAFETY: every active lane was written on the first leaf.
-                    let (r, r4) = unsafe { rays[k].assume_init_ref() };
-                    match blk.test(r4, tmin[k], cut[k]) {
+                    let r = unsafe { rays[k].assume_init_ref() };
+                    match blk.test(&wide::TriRay4::new(r), tmin[k], cut[k]) {
                         wide::Block::Hits(mut m, t, det) => {
                             while m != 0 {
                                 let l = m.trailing_zeros();
