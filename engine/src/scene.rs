@@ -9,7 +9,7 @@ use rothray_csg::{first_surface, Mode, NodeKind, PacketMemo, Program, ProgramBui
 use rothray_primitives::{
     bvh::FlatBvh,
     gcyl::GenCylData,
-    mesh::NearestRays8,
+    mesh::{NearestRays8, NO_THROUGH},
     sweep::SweptSphereData,
     table::LeafData,
     Aabb, LeafError, LeafShape, LeafTable, Span, Surf,
@@ -202,23 +202,11 @@ struct Shortcut {
     /// Per packet mesh (as in `packet_meshes`): the object whose tree is that
     /// mesh alone when every other leaf is empty, or `u32::MAX`.
     owner: Vec<u32>,
-    /// Per packet mesh, its object.
-    object: Vec<u32>,
-    /// Per other leaf: is it subtracted (under an odd number of subtrahend
-    /// positions)? One that covers the mesh's entry then most likely cuts it
-    /// away: the ray goes straight to the redo ([`Quick::Redo`]).
-    subtracted: Vec<bool>,
-}
-
-/// What the packet shortcut found for a ray.
-enum Quick {
-    /// The answer.
-    Answer(Option<Hit>),
-    /// Object `.0` is best evaluated by its redo, first up to `.1` (see
-    /// [`RenderScene::object_first_from`]).
-    Redo(u32, f32),
-    /// Evaluate as usual.
-    Eval,
+    /// The cheap analytic leaves under an odd number of subtrahend positions
+    /// (subtracted), with their boxes: one that covers a mesh's first entry
+    /// would cut it away, so the packet walk goes on through it
+    /// ([`NearestRays8::through`]) and the evaluation needs no redo.
+    cutters: Vec<(u32, Aabb)>,
 }
 
 /// Per leaf, whether it lies under an odd number of subtrahend positions of
@@ -298,8 +286,9 @@ pub struct PacketScratch {
     memo: PacketMemo,
     /// Rays answered by the packet shortcut so far (for tests).
     pub shortcuts: u64,
-    /// Rays the packet shortcut sent straight to a redo so far (for tests).
-    pub redos: u64,
+    /// Packet rays whose mesh walks went on through a subtracted leaf so far
+    /// (for tests).
+    pub throughs: u64,
 }
 
 /// The mesh leaves of `roots` that a nearest-hit evaluation queries in nearest
@@ -683,13 +672,14 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
                 if keep { oi } else { u32::MAX }
             })
             .collect();
-        let object: Vec<u32> = pm.iter().map(|&m| scene.leaf_info[m as usize].object).collect();
         let mut sub = vec![false; scene.leaves.len()];
         for o in &scene.objects {
             mark_subtracted(&scene.program, o.root, false, &mut sub);
         }
         let subtracted: Vec<bool> = rest.iter().map(|&l| sub[l as usize]).collect();
-        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner, object, subtracted })
+        let cutters: Vec<(u32, Aabb)> =
+            exact.iter().zip(&subtracted).zip(&others).filter(|((&l, &s), _)| s && l != u32::MAX).map(|((&l, _), b)| (l, *b)).collect();
+        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner, cutters })
     };
     scene.packet_meshes = pm;
     scene.redo_window = scene
@@ -763,19 +753,7 @@ impl RenderScene {
     /// First surface of object `oi` within `[tmin, tmax]`: `(t, surface)`.
     #[inline]
     fn object_first(&self, oi: u32, ctx: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) -> Option<(f32, Surf)> {
-        self.object_first_from(oi, ctx, tmin, tmax, None, scratch)
-    }
-
-    /// [`RenderScene::object_first`]; with `window` (before `tmax`) it goes
-    /// straight to the redo, first over `[tmin, window]`: a guess that the
-    /// nearest-mode evaluation would find nothing sure and that the answer lies
-    /// there (every path gives the exact answer).
-    #[inline]
-    fn object_first_from(&self, oi: u32, ctx: &RayCtx, tmin: f32, tmax: f32, window: Option<f32>, scratch: &mut Scratch) -> Option<(f32, Surf)> {
         let root = self.objects[oi as usize].root;
-        if let Some(t1) = window.filter(|&t1| t1 < tmax) {
-            return self.redo(root, ctx, tmin, t1, tmax, scratch);
-        }
         let valid = self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
         if f.is_none() && valid < tmax {
@@ -857,8 +835,36 @@ impl RenderScene {
         let tmin: [f32; 8] = std::array::from_fn(|k| rays[k].tmin);
         let tmax: [f32; 8] = std::array::from_fn(|k| rays[k].tmax);
         let slack: [f32; 8] = std::array::from_fn(|k| 4.0 * eps[k]);
+        // A ray through a subtracted analytic leaf keeps walking the meshes to
+        // where that leaf ends when their first crossing lies inside it (the
+        // nearest-mode answer would be cut away there: with the crossings up to
+        // the leaf's end, the evaluation needs no redo).
+        let mut through = NO_THROUGH;
+        if let Some(sc) = self.shortcut.as_ref().filter(|sc| !sc.cutters.is_empty()) {
+            let inv_d: [Vec3; 8] = std::array::from_fn(|k| d[k].recip());
+            for &(l, ref b) in &sc.cutters {
+                // Only a guess (a ray without it is redone, exactly): a box
+                // that the packet's corner rays both miss is taken as missed.
+                if b.ray_range(o, inv_d[0], tmin[0], tmax[0]).is_none() && b.ray_range(o, inv_d[7], tmin[7], tmax[7]).is_none() {
+                    continue;
+                }
+                for k in 0..8 {
+                    if b.ray_range(o, inv_d[k], tmin[k], tmax[k]).is_none() {
+                        continue;
+                    }
+                    let mut first = First(None);
+                    self.leaves.spans(l, o, d[k], tmin[k], tmax[k], &mut first);
+                    if let Some(f) = first.0 {
+                        if f.t0 < through[k][0] {
+                            ps.throughs += (through[k][0] == f32::INFINITY) as u64;
+                            through[k] = [f.t0, f.t1 + 64.0 * eps[k]];
+                        }
+                    }
+                }
+            }
+        }
         ps.memo.clear();
-        let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack };
+        let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack, through: &through };
         for &i in &self.packet_meshes {
             ps.memo.add(i, &tmin, &tmax, |sp| self.leaves.mesh_nearest8(i, &q, 0xff, sp));
         }
@@ -886,22 +892,14 @@ impl RenderScene {
             if left & (1 << k) == 0 {
                 continue;
             }
-            let mut redo = None;
             if let Some(sc) = &self.shortcut {
-                match self.shortcut_hit(sc, &rays[k], &ctx[k], memo, k, normals) {
-                    Quick::Answer(h) => {
-                        out[k] = h;
-                        ps.shortcuts += 1;
-                        continue;
-                    }
-                    Quick::Redo(oi, at) => {
-                        redo = Some((oi, at));
-                        ps.redos += 1;
-                    }
-                    Quick::Eval => {}
+                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], memo, k, normals) {
+                    out[k] = h;
+                    ps.shortcuts += 1;
+                    continue;
                 }
             }
-            out[k] = self.intersect_ctx_redo(&rays[k], &ctx[k], &mut ps.scratch, normals, redo);
+            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch, normals);
         }
     }
 
@@ -913,17 +911,10 @@ impl RenderScene {
     }
 
     fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch, normals: bool) -> Option<Hit> {
-        self.intersect_ctx_redo(ray, ctx, scratch, normals, None)
-    }
-
-    /// [`RenderScene::intersect_ctx`], with object `redo.0` going straight to its
-    /// redo, first up to `redo.1` ([`RenderScene::object_first_from`]).
-    fn intersect_ctx_redo(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch, normals: bool, redo: Option<(u32, f32)>) -> Option<Hit> {
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
-        let redo_at = |oi: u32| redo.and_then(|(o, v)| (o == oi).then_some(v));
         for &oi in &self.unbounded {
-            if let Some((t, s)) = self.object_first_from(oi, ctx, ray.tmin, best_t, redo_at(oi), scratch) {
+            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -931,7 +922,7 @@ impl RenderScene {
             }
         }
         self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, best_t, |oi, _| {
-            if let Some((t, s)) = self.object_first_from(oi, ctx, ray.tmin, best_t, redo_at(oi), scratch) {
+            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -962,19 +953,19 @@ impl RenderScene {
     /// (`Some(None)`: no hit at all, every leaf is empty on the ray's range).
     #[inline]
     #[allow(clippy::too_many_arguments)]
-    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize, normals: bool) -> Quick {
+    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize, normals: bool) -> Option<Option<Hit>> {
         // The nearest packet-mesh entry, and up to where each mesh is known empty.
-        let mut best: Option<(f32, Surf, usize, f32)> = None;
+        let mut best: Option<(f32, Surf, usize)> = None;
         let mut clear = [f32::INFINITY; PACKET_MESHES];
         for (j, &m) in self.packet_meshes.iter().enumerate() {
-            let Some((spans, valid)) = memo.lane(k, m) else { return Quick::Eval };
+            let (spans, valid) = memo.lane(k, m)?;
             match spans.first() {
                 // Inside at `tmin`: the shortcut does not reason about that.
-                Some(s) if !s.s0.is_real() => return Quick::Eval,
+                Some(s) if !s.s0.is_real() => return None,
                 Some(s) => {
                     clear[j] = s.t0;
                     if best.is_none_or(|b| s.t0 < b.0) {
-                        best = Some((s.t0, s.s0, j, valid));
+                        best = Some((s.t0, s.s0, j));
                     }
                 }
                 None if valid < ray.tmax => clear[j] = valid,
@@ -985,43 +976,34 @@ impl RenderScene {
         // (as for the redo window: what lies further cannot fuse with it or cut
         // it short), or the whole range when there is no entry.
         let (reach, j_best) = match best {
-            Some((t, _, j, _)) => (t + 16.0 * ctx.eps, j),
+            Some((t, _, j)) => (t + 16.0 * ctx.eps, j),
             None => (ray.tmax, usize::MAX),
         };
         for (j, &c) in clear[..self.packet_meshes.len()].iter().enumerate() {
             if j != j_best && c <= reach {
-                return Quick::Eval;
+                return None;
             }
         }
-        for (i, (b, &l)) in sc.others.iter().zip(&sc.exact).enumerate() {
+        for (b, &l) in sc.others.iter().zip(&sc.exact) {
             if let Some((t0, _)) = b.ray_range(ctx.o, ctx.inv_d, ray.tmin, ray.tmax) {
                 if t0 <= reach {
                     // The box reaches the entry: does the leaf itself?
-                    if l == u32::MAX {
-                        return Quick::Eval;
-                    }
                     let mut first = First(None);
-                    self.leaves.spans(l, ctx.o, ctx.d, ray.tmin, ray.tmax, &mut first);
-                    if let Some(f) = first.0.filter(|f| f.t0 <= reach) {
-                        return match best {
-                            // A subtracted leaf over the start of the mesh's span:
-                            // the nearest-mode evaluation would find nothing, and
-                            // the answer is most likely where the leaf ends.
-                            Some((t, ..)) if sc.subtracted[i] && f.t0 <= t && f.t1 >= reach => {
-                                Quick::Redo(sc.object[best.map_or(0, |b| b.2)], f.t1 + 64.0 * ctx.eps)
-                            }
-                            _ => Quick::Eval,
-                        };
+                    if l != u32::MAX {
+                        self.leaves.spans(l, ctx.o, ctx.d, ray.tmin, reach, &mut first);
+                    }
+                    if l == u32::MAX || first.0.is_some() {
+                        return None;
                     }
                 }
             }
         }
-        let Some((t, s, j, _)) = best else { return Quick::Answer(None) };
+        let Some((t, s, j)) = best else { return Some(None) };
         let oi = sc.owner[j];
         if oi == u32::MAX {
-            return Quick::Eval;
+            return None;
         }
-        Quick::Answer(Some(self.hit_at(ray, oi, t, s, normals)))
+        Some(Some(self.hit_at(ray, oi, t, s, normals)))
     }
 
     /// Any-hit with caller-provided scratch.

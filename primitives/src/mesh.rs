@@ -260,7 +260,14 @@ pub struct NearestRays8<'a> {
     pub tmax: &'a [f32; 8],
     /// How far past its nearest crossing each ray's walk keeps collecting.
     pub slack: &'a [f32; 8],
+    /// Per ray `[a, b]`: a nearest crossing within it keeps the ray's walk
+    /// collecting up to `b` (a CSG difference whose subtrahend covers `[a, b]`
+    /// needs the crossings up to where it ends); empty (`a > b`) for none.
+    pub through: &'a [[f32; 2]; 8],
 }
+
+/// No [`NearestRays8::through`] intervals.
+pub const NO_THROUGH: [[f32; 2]; 8] = [[f32::INFINITY, f32::NEG_INFINITY]; 8];
 
 /// Per-ray constants of the conservative slab test.
 #[derive(Clone, Copy)]
@@ -1288,7 +1295,13 @@ impl MeshData {
         leaf: u32,
         out: &mut [Vec<Span>; 8],
     ) -> (u32, [f32; 8]) {
-        let NearestRays8 { o, d, tmin, tmax, slack } = *q;
+        let NearestRays8 { o, d, tmin, tmax, slack, through } = *q;
+        // Where ray `k`'s walk may stop once it has met a crossing at `t`.
+        let stop = |k: usize, t: f32| {
+            let c = (t + slack[k]).max(t.next_up());
+            let [a, b] = through[k];
+            if t >= a && t <= b { c.max(b) } else { c }
+        };
         let mut cut = [f32::INFINITY; 8];
         if self.wide.is_empty() || self.rule != InsideRule::Orientation {
             return (0, cut);
@@ -1405,7 +1418,7 @@ impl MeshData {
                         for slot in blk.slots() {
                             if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
                                 xs[k].push(Crossing { t, slot, front });
-                                cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                                cut[k] = cut[k].min(stop(k, t));
                                 shrunk = true;
                             }
                         }
@@ -1417,7 +1430,7 @@ impl MeshData {
                             m &= m - 1;
                             let t = b.t[l].0[k];
                             xs[k].push(Crossing { t, slot: blk.slots().start + l as u32, front: b.front[l] & (1 << k) != 0 });
-                            cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                            cut[k] = cut[k].min(stop(k, t));
                             shrunk = true;
                         }
                     }
@@ -1436,7 +1449,7 @@ impl MeshData {
                                 m &= m - 1;
                                 let t = t[l as usize];
                                 xs[k].push(Crossing { t, slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
-                                cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                                cut[k] = cut[k].min(stop(k, t));
                                 shrunk = true;
                             }
                         }
@@ -1444,7 +1457,7 @@ impl MeshData {
                             for slot in blk.slots() {
                                 if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
                                     xs[k].push(Crossing { t, slot, front });
-                                    cut[k] = cut[k].min((t + slack[k]).max(t.next_up()));
+                                    cut[k] = cut[k].min(stop(k, t));
                                     shrunk = true;
                                 }
                             }

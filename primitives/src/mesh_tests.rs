@@ -657,6 +657,7 @@ fn mesh_spans_nearest8_matches_single_rays() {
     for (name, (pos, tris)) in [("cube", cube()), ("octasphere(5)", octasphere(5))] {
         let m = MeshData::new(pos.clone(), tris.clone(), InsideRule::Orientation).unwrap();
         let (mut packed, mut single) = (0, 0);
+        let mut through_held = 0;
         // Rays of narrow bundles from outside the bounds (what camera packets are).
         let (mut narrow, mut narrow_packed) = (0, 0);
         for i in 0..3000 {
@@ -684,7 +685,7 @@ fn mesh_spans_nearest8_matches_single_rays() {
             let slack: [f32; 8] = std::array::from_fn(|k| if k == 2 { 0.0 } else { 1e-4 * k as f32 });
             let active = if i % 13 == 0 { 0b1011_0110 } else { 0xff };
             let mut out: [Vec<Span>; 8] = Default::default();
-            let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack };
+            let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack, through: &NO_THROUGH };
             let (done, cut) = m.spans_nearest8(&q, active, 7, &mut out);
             assert_eq!(done & !active, 0, "{name}: bundle {i}: a ray outside the active set was traced");
             // The SSE2 walk (machines without AVX: every leaf ray by ray) agrees exactly.
@@ -714,8 +715,45 @@ fn mesh_spans_nearest8_matches_single_rays() {
                 let ts = |s: &[Span]| s.iter().map(|s| (s.t0, s.t1, s.s0, s.s1)).collect::<Vec<_>>();
                 assert_eq!(ts(&out[k]), ts(&one), "{name}: bundle {i} ray {k}: spans; o {o:?} d {:?}", d[k]);
             }
+            // The same bundle with `through` intervals (a subtrahend over the first
+            // crossing keeps the walk going to its end): still exact on
+            // [tmin, cut], and past the interval's end when the first crossing
+            // lies in it; SSE2 and AVX agree.
+            let through: [[f32; 2]; 8] = std::array::from_fn(|k| {
+                let first = out[k].first().map_or(1.0, |s| s.t0);
+                match k % 3 {
+                    0 => [first - 0.05, first + rng.gen_range(0.0..0.8)],
+                    1 => [first + 0.01, first + 0.3],
+                    _ => [f32::INFINITY, f32::NEG_INFINITY],
+                }
+            });
+            let qt = NearestRays8 { through: &through, ..q };
+            let mut out_t: [Vec<Span>; 8] = Default::default();
+            let nt = m.spans_nearest8(&qt, active, 7, &mut out_t);
+            let mut out_ts: [Vec<Span>; 8] = Default::default();
+            let nts = m.spans_nearest8_sse(&qt, active, 7, &mut out_ts);
+            assert_eq!((nts.0, nts.1.map(f32::to_bits)), (nt.0, nt.1.map(f32::to_bits)), "{name}: bundle {i}: SSE2 walk with through");
+            assert_eq!(out_ts, out_t, "{name}: bundle {i}: SSE2 walk spans with through");
+            assert_eq!(nt.0, done, "{name}: bundle {i}: the same rays are done with through");
+            for k in 0..8 {
+                if done & (1 << k) == 0 {
+                    continue;
+                }
+                let v = nt.1[k];
+                let mut full: Vec<Span> = Vec::new();
+                m.spans(o, d[k], tmin[k], v.min(tmax[k]), 7, &mut full);
+                assert_eq!(full, out_t[k], "{name}: bundle {i} ray {k}: through {:?}: not the full spans on [tmin, {v}]", through[k]);
+                let crossings = m.crossings(o, d[k], tmin[k], tmax[k]);
+                if let Some(&(t1, ..)) = crossings.first() {
+                    if t1 >= through[k][0] && t1 <= through[k][1] {
+                        through_held += 1;
+                        assert!(v >= through[k][1].min(tmax[k]), "{name}: bundle {i} ray {k}: cut {v} short of {:?} (first crossing {t1})", through[k]);
+                    }
+                }
+            }
         }
-        println!("{name}: {packed} rays traced in packets, {single} left to the single-ray query; narrow bundles: {narrow_packed} of {narrow} rays packed");
+        println!("{name}: {packed} rays traced in packets, {single} left to the single-ray query; narrow bundles: {narrow_packed} of {narrow} rays packed; {through_held} walks held on through a subtrahend");
+        assert!(through_held > 1000, "{name}: too few walks held on");
         assert!(narrow_packed * 10 > narrow * 8, "{name}: narrow bundles should go as packets");
     }
 }
