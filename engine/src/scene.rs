@@ -207,6 +207,8 @@ struct Shortcut {
     /// would cut it away, so the packet walk goes on through it
     /// ([`NearestRays8::through`]) and the evaluation needs no redo.
     cutters: Vec<(u32, Aabb)>,
+    /// Per other leaf, its position in `cutters`, or `u32::MAX`.
+    cutter_of: Vec<u32>,
 }
 
 /// Per leaf, whether it lies under an odd number of subtrahend positions of
@@ -289,6 +291,10 @@ pub struct PacketScratch {
     /// Packet rays whose mesh walks went on through a subtracted leaf so far
     /// (for tests).
     pub throughs: u64,
+    /// Per cutter (see `Shortcut::cutters`) and lane, its first span on the
+    /// ray's range, where `cut_done` has the lane's bit.
+    cut_spans: Vec<Option<Span>>,
+    cut_done: Vec<u8>,
 }
 
 /// The mesh leaves of `roots` that a nearest-hit evaluation queries in nearest
@@ -679,7 +685,9 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
         let subtracted: Vec<bool> = rest.iter().map(|&l| sub[l as usize]).collect();
         let cutters: Vec<(u32, Aabb)> =
             exact.iter().zip(&subtracted).zip(&others).filter(|((&l, &s), _)| s && l != u32::MAX).map(|((&l, _), b)| (l, *b)).collect();
-        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner, cutters })
+        let cutter_of: Vec<u32> =
+            rest.iter().map(|l| cutters.iter().position(|c| c.0 == *l).map_or(u32::MAX, |p| p as u32)).collect();
+        owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner, cutters, cutter_of })
     };
     scene.packet_meshes = pm;
     scene.redo_window = scene
@@ -842,18 +850,24 @@ impl RenderScene {
         let mut through = NO_THROUGH;
         if let Some(sc) = self.shortcut.as_ref().filter(|sc| !sc.cutters.is_empty()) {
             let inv_d: [Vec3; 8] = std::array::from_fn(|k| d[k].recip());
-            for &(l, ref b) in &sc.cutters {
+            ps.cut_spans.resize(8 * sc.cutters.len(), None);
+            ps.cut_done.resize(sc.cutters.len(), 0);
+            for (ci, &(l, ref b)) in sc.cutters.iter().enumerate() {
                 // Only a guess (a ray without it is redone, exactly): a box
                 // that the packet's corner rays both miss is taken as missed.
+                ps.cut_done[ci] = 0;
                 if b.ray_range(o, inv_d[0], tmin[0], tmax[0]).is_none() && b.ray_range(o, inv_d[7], tmin[7], tmax[7]).is_none() {
                     continue;
                 }
+                ps.cut_done[ci] = 0xff;
                 for k in 0..8 {
+                    ps.cut_spans[8 * ci + k] = None;
                     if b.ray_range(o, inv_d[k], tmin[k], tmax[k]).is_none() {
                         continue;
                     }
                     let mut first = First(None);
                     self.leaves.spans(l, o, d[k], tmin[k], tmax[k], &mut first);
+                    ps.cut_spans[8 * ci + k] = first.0;
                     if let Some(f) = first.0 {
                         if f.t0 < through[k][0] {
                             ps.throughs += (through[k][0] == f32::INFINITY) as u64;
@@ -893,7 +907,8 @@ impl RenderScene {
                 continue;
             }
             if let Some(sc) = &self.shortcut {
-                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], memo, k, normals) {
+                let cut = (ps.cut_spans.as_slice(), ps.cut_done.as_slice());
+                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], memo, cut, k, normals) {
                     out[k] = h;
                     ps.shortcuts += 1;
                     continue;
@@ -951,9 +966,19 @@ impl RenderScene {
 
     /// The nearest hit of packet lane `k` by the [`Shortcut`], when it applies
     /// (`Some(None)`: no hit at all, every leaf is empty on the ray's range).
+    /// `cut`: the cutters' first spans made before the packet walk.
     #[inline]
     #[allow(clippy::too_many_arguments)]
-    fn shortcut_hit(&self, sc: &Shortcut, ray: &Ray, ctx: &RayCtx, memo: &PacketMemo, k: usize, normals: bool) -> Option<Option<Hit>> {
+    fn shortcut_hit(
+        &self,
+        sc: &Shortcut,
+        ray: &Ray,
+        ctx: &RayCtx,
+        memo: &PacketMemo,
+        cut: (&[Option<Span>], &[u8]),
+        k: usize,
+        normals: bool,
+    ) -> Option<Option<Hit>> {
         // The nearest packet-mesh entry, and up to where each mesh is known empty.
         let mut best: Option<(f32, Surf, usize)> = None;
         let mut clear = [f32::INFINITY; PACKET_MESHES];
@@ -984,7 +1009,15 @@ impl RenderScene {
                 return None;
             }
         }
-        for (b, &l) in sc.others.iter().zip(&sc.exact) {
+        for (i, (b, &l)) in sc.others.iter().zip(&sc.exact).enumerate() {
+            let ci = sc.cutter_of[i] as usize;
+            if ci != u32::MAX as usize && cut.1[ci] & (1 << k) != 0 {
+                // Its first span is known: any before `reach`?
+                if cut.0[8 * ci + k].is_some_and(|f| f.t0 < reach) {
+                    return None;
+                }
+                continue;
+            }
             if let Some((t0, _)) = b.ray_range(ctx.o, ctx.inv_d, ray.tmin, ray.tmax) {
                 if t0 <= reach {
                     // The box reaches the entry: does the leaf itself?
