@@ -232,6 +232,22 @@ fn bitten_mesh_packets_match_single_rays() {
             }
         }
     }
+    // A packet with unusable rays (NaN or zero direction, tmin > tmax) goes ray
+    // by ray: those get no hit, the others what the single-ray query gives.
+    let cam = rothray::engine::Camera { eye: glam::Vec3::new(0.0, 0.5, 4.0), target: glam::Vec3::ZERO, up: glam::Vec3::Y, fov_y_deg: 30.0 };
+    let cr = cam.rays(64, 64);
+    let mut packet = cr.ray8(&std::array::from_fn(|k| 30.0 + (k % 4) as f32), &std::array::from_fn(|k| 30.0 + (k / 4) as f32));
+    packet[1].dir.y = f32::NAN;
+    packet[4].dir = glam::Vec3::ZERO;
+    packet[6].tmin = 5.0;
+    packet[6].tmax = 1.0;
+    let mut out = [None; 8];
+    scene.intersect_packet(&packet, &mut ps, &mut out);
+    for k in 0..8 {
+        let one = if [1, 4, 6].contains(&k) { None } else { scene.intersect(&packet[k]) };
+        assert_eq!(out[k].map(|h| (h.t.to_bits(), h.leaf)), one.map(|h| (h.t.to_bits(), h.leaf)), "unusable-ray packet, lane {k}");
+    }
+    assert!(out[0].is_some(), "the packet is aimed at the mesh");
     println!("{rays} rays, {hits} hits, {} by the packet shortcut, {} mesh walks held on through the bite (two queries per ray)", ps.shortcuts, ps.throughs);
     assert!(hits > 10_000 && ps.shortcuts > 10_000 && ps.throughs > 500);
 }

@@ -179,6 +179,19 @@ impl PacketMemo {
         })
     }
 
+    /// [`PacketMemo::empty`] for all eight lanes at once (one lookup): bit `k`
+    /// set when lane `k` is known empty on `[lo[k], hi[k]]`.
+    #[inline]
+    pub fn empty8(&self, leaf: u32, lo: &[f32; 8], hi: &[f32; 8]) -> u32 {
+        let Some(e) = self.leaves[..self.len].iter().find(|e| e.leaf == leaf) else { return 0 };
+        let mut m = 0;
+        for k in 0..8 {
+            let empty = lo[k] >= e.tmin[k] && hi[k] <= e.tmax[k] && e.valid[k] >= hi[k] && e.spans[k].is_empty();
+            m |= (empty as u32) << k;
+        }
+        m & e.done
+    }
+
     /// Lane `k`'s recorded spans of `leaf` (on its whole query range) and where
     /// they stop being exact, when that lane is done.
     #[inline]

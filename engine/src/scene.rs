@@ -825,7 +825,11 @@ impl RenderScene {
             return;
         }
         let o = rays[0].origin;
-        let packet = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| r.is_valid() && r.origin == o);
+        // `is_valid` for each ray, with the shared origin checked once.
+        let packet = n == 8
+            && !self.packet_meshes.is_empty()
+            && o.is_finite()
+            && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax);
         if !packet {
             for k in 0..n {
                 out[k] = if rays[k].is_valid() {
@@ -848,8 +852,8 @@ impl RenderScene {
         // nearest-mode answer would be cut away there: with the crossings up to
         // the leaf's end, the evaluation needs no redo).
         let mut through = NO_THROUGH;
+        let inv_d: [Vec3; 8] = std::array::from_fn(|k| d[k].recip());
         if let Some(sc) = self.shortcut.as_ref().filter(|sc| !sc.cutters.is_empty()) {
-            let inv_d: [Vec3; 8] = std::array::from_fn(|k| d[k].recip());
             ps.cut_spans.resize(8 * sc.cutters.len(), None);
             ps.cut_done.resize(sc.cutters.len(), 0);
             for (ci, &(l, ref b)) in sc.cutters.iter().enumerate() {
@@ -886,12 +890,16 @@ impl RenderScene {
         // packet of such rays only (background) is done.
         let mut left = 0xffu32;
         if let Some(cover) = &self.packet_cover {
+            let mut missed = 0xffu32;
+            for &l in cover {
+                missed &= ps.memo.empty8(l, &tmin, &tmax);
+            }
             for k in 0..8 {
-                if cover.iter().all(|&l| ps.memo.empty(k, l, tmin[k], tmax[k])) {
+                if missed & (1 << k) != 0 {
                     out[k] = None;
-                    left &= !(1 << k);
                 }
             }
+            left &= !missed;
             if left == 0 {
                 return;
             }
@@ -901,7 +909,7 @@ impl RenderScene {
         // on store forwarding.
         let memo = &ps.memo;
         let ctx: [RayCtx; 8] =
-            std::array::from_fn(|k| RayCtx { o, d: d[k], inv_d: d[k].recip(), eps: eps[k], memo: Some((memo, k)) });
+            std::array::from_fn(|k| RayCtx { o, d: d[k], inv_d: inv_d[k], eps: eps[k], memo: Some((memo, k)) });
         for k in 0..8 {
             if left & (1 << k) == 0 {
                 continue;
