@@ -19,5 +19,5 @@
 pub mod program;
 pub mod spans;
 
-pub use program::{first_surface, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
+pub use program::{first_surface, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 pub use spans::{combine, spill_count, Op, SpanList};

@@ -196,8 +196,13 @@ impl PacketMemo {
     /// they stop being exact, when that lane is done.
     #[inline]
     pub fn lane(&self, k: usize, leaf: u32) -> Option<(&[Span], f32)> {
-        let e = self.leaves[..self.len].iter().find(|e| e.leaf == leaf)?;
-        (e.done & (1 << k) != 0).then(|| (e.spans[k].as_slice(), e.valid[k]))
+        self.lanes(leaf)?.get(k)
+    }
+
+    /// Every lane's record of `leaf` (one lookup for a packet's eight rays).
+    #[inline]
+    pub fn lanes(&self, leaf: u32) -> Option<MemoLanes<'_>> {
+        self.leaves[..self.len].iter().find(|e| e.leaf == leaf).map(|e| MemoLanes(e))
     }
 
     /// Lane `k`'s spans of `leaf` on `[lo, hi]` and where they stop being exact,
@@ -214,6 +219,20 @@ impl PacketMemo {
             push_clipped(out, s.t0, s.s0, s.t1, s.s1, lo, end);
         }
         Some(if v >= hi { f32::INFINITY } else { v })
+    }
+}
+
+/// The eight lanes' records of one leaf in a [`PacketMemo`].
+#[derive(Clone, Copy, Debug)]
+pub struct MemoLanes<'a>(&'a MemoLeaf);
+
+impl<'a> MemoLanes<'a> {
+    /// Lane `k`'s spans (on its whole query range) and where they stop being
+    /// exact, when that lane is done.
+    #[inline]
+    pub fn get(self, k: usize) -> Option<(&'a [Span], f32)> {
+        let e = self.0;
+        (e.done & (1 << k) != 0).then(|| (e.spans[k].as_slice(), e.valid[k]))
     }
 }
 

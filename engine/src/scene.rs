@@ -5,7 +5,7 @@ use std::cell::RefCell;
 
 use glam::{DAffine3, Vec3};
 use hecs::{Entity, World};
-use rothray_csg::{first_surface, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
+use rothray_csg::{first_surface, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 use rothray_primitives::{
     bvh::FlatBvh,
     gcyl::GenCylData,
@@ -908,6 +908,11 @@ impl RenderScene {
         // just built (its fields written piecewise, read with wider loads) stalls
         // on store forwarding.
         let memo = &ps.memo;
+        // The packet meshes' records, looked up once for the eight rays.
+        let mut lanes: [Option<MemoLanes>; PACKET_MESHES] = [None; PACKET_MESHES];
+        for (j, &m) in self.packet_meshes.iter().enumerate() {
+            lanes[j] = memo.lanes(m);
+        }
         let ctx: [RayCtx; 8] =
             std::array::from_fn(|k| RayCtx { o, d: d[k], inv_d: inv_d[k], eps: eps[k], memo: Some((memo, k)) });
         for k in 0..8 {
@@ -916,7 +921,7 @@ impl RenderScene {
             }
             if let Some(sc) = &self.shortcut {
                 let cut = (ps.cut_spans.as_slice(), ps.cut_done.as_slice());
-                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], memo, cut, k, normals) {
+                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], &lanes, cut, k, normals) {
                     out[k] = h;
                     ps.shortcuts += 1;
                     continue;
@@ -982,7 +987,7 @@ impl RenderScene {
         sc: &Shortcut,
         ray: &Ray,
         ctx: &RayCtx,
-        memo: &PacketMemo,
+        lanes: &[Option<MemoLanes>; PACKET_MESHES],
         cut: (&[Option<Span>], &[u8]),
         k: usize,
         normals: bool,
@@ -990,8 +995,8 @@ impl RenderScene {
         // The nearest packet-mesh entry, and up to where each mesh is known empty.
         let mut best: Option<(f32, Surf, usize)> = None;
         let mut clear = [f32::INFINITY; PACKET_MESHES];
-        for (j, &m) in self.packet_meshes.iter().enumerate() {
-            let (spans, valid) = memo.lane(k, m)?;
+        for (j, l) in lanes[..self.packet_meshes.len()].iter().enumerate() {
+            let (spans, valid) = l.and_then(|l| l.get(k))?;
             match spans.first() {
                 // Inside at `tmin`: the shortcut does not reason about that.
                 Some(s) if !s.s0.is_real() => return None,
