@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Scene benchmark beside POV-Ray 3.7, measured in the same run.
 #   benches/compare_povray.sh [WIDTH HEIGHT] [scene ...]
-# rothray: `rothray bench --json` (median of 7 renders after a warm-up; with and
-# without shadow rays). POV-Ray: `+Q0 -A +WT2` (no shadows at +Q0), its reported
+# rothray: `rothray bench --json --repeats 15` (median of 15 renders after a
+# warm-up, about as long as one POV-Ray trace; with and without shadow rays). POV-Ray: `+Q0 -A +WT2` (no shadows at +Q0), its reported
 # Trace Time. ROUNDS (default 3) rounds alternate the two on each scene; the
 # table gives the medians over the rounds, their ratio, and the range of the
 # per-round ratios (this machine is shared: single runs move by up to 2x).
@@ -24,8 +24,8 @@ for s in "${SCENES[@]}"; do
   f=scenes/$s.json
   ns=(); ws=(); pv=()
   for _ in $(seq "$ROUNDS"); do
-    ns+=("$($BIN bench "$f" --width "$W" --height "$H" --no-shadows --json | tail -1 | med)")
-    ws+=("$($BIN bench "$f" --width "$W" --height "$H" --json | tail -1 | med)")
+    ns+=("$($BIN bench "$f" --width "$W" --height "$H" --no-shadows --repeats 15 --json | tail -1 | med)")
+    ws+=("$($BIN bench "$f" --width "$W" --height "$H" --repeats 15 --json | tail -1 | med)")
     pv+=("$(python3 tools/pov_compare.py "$f" --time-only --width "$W" --height "$H" 2>/dev/null | tail -1)")
   done
   python3 - "$s" "${ns[*]}" "${ws[*]}" "${pv[*]}" <<'PY'
