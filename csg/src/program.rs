@@ -202,7 +202,7 @@ impl PacketMemo {
     /// Every lane's record of `leaf` (one lookup for a packet's eight rays).
     #[inline]
     pub fn lanes(&self, leaf: u32) -> Option<MemoLanes<'_>> {
-        self.leaves[..self.len].iter().find(|e| e.leaf == leaf).map(|e| MemoLanes(e))
+        self.leaves[..self.len].iter().find(|e| e.leaf == leaf).map(MemoLanes)
     }
 
     /// Lane `k`'s spans of `leaf` on `[lo, hi]` and where they stop being exact,

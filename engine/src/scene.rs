@@ -894,9 +894,9 @@ impl RenderScene {
             for &l in cover {
                 missed &= ps.memo.empty8(l, &tmin, &tmax);
             }
-            for k in 0..8 {
+            for (k, o) in out.iter_mut().enumerate().take(8) {
                 if missed & (1 << k) != 0 {
-                    out[k] = None;
+                    *o = None;
                 }
             }
             left &= !missed;
