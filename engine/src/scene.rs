@@ -809,8 +809,10 @@ impl RenderScene {
     /// [`RenderScene::intersect_with`] ray by ray. Eight valid rays from one origin
     /// (camera rays through neighbouring pixels) go as a packet: the scene's
     /// nearest-mode meshes are traced once for all eight
-    /// ([`LeafTable::mesh_nearest8`]), then each ray's CSG is evaluated with
-    /// those results.
+    /// ([`LeafTable::mesh_nearest8`], going on through subtracted analytic
+    /// leaves where a ray's first crossing lies inside one); then each ray is
+    /// settled from those results where they decide it (a miss of every
+    /// containing mesh, the [`Shortcut`]), else its CSG is evaluated with them.
     pub fn intersect_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>]) {
         self.intersect_packet_with(rays, ps, out, true);
     }
