@@ -812,7 +812,8 @@ impl RenderScene {
     /// ([`LeafTable::mesh_nearest8`], going on through subtracted analytic
     /// leaves where a ray's first crossing lies inside one); then each ray is
     /// settled from those results where they decide it (a miss of every
-    /// containing mesh, the [`Shortcut`]), else its CSG is evaluated with them.
+    /// containing mesh, or the packet shortcut of the README), else its CSG is
+    /// evaluated with them.
     pub fn intersect_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>]) {
         self.intersect_packet_with(rays, ps, out, true);
     }
