@@ -251,3 +251,31 @@ fn bitten_mesh_packets_match_single_rays() {
     println!("{rays} rays, {hits} hits, {} by the packet shortcut, {} mesh walks held on through the bite (two queries per ray)", ps.shortcuts, ps.throughs);
     assert!(hits > 10_000 && ps.shortcuts > 10_000 && ps.throughs > 500);
 }
+
+#[test]
+fn packet_shortcut_keeps_the_short_span_rule() {
+    // Regression (found in review): a grazing ray crosses the mesh over less
+    // than eps. The full evaluation drops that span in the union (its other
+    // operand, a ball far behind, has spans in the range evaluated) and hits
+    // the ball; the packet shortcut must not take the mesh's entry instead.
+    let mesh = octa_mesh(DVec3::ZERO, 1.0, 1);
+    let sphere = Shape::Sphere { c: DVec3::new(1.0, 0.0, -0.5), r: 0.25 };
+    let scene = bake(&[Shape::Union(vec![sphere, mesh.clone()])]);
+    remove_mesh_files(std::slice::from_ref(&mesh));
+    let d = glam::Vec3::new(1e-4, 1e-4, -1.0);
+    let o = glam::Vec3::new(1.0 - 1e-5, 0.0, 0.0) - d * 5.0;
+    let packet: Vec<rothray::engine::Ray> = (0..8)
+        .map(|k| rothray::engine::Ray { origin: o, dir: d + glam::Vec3::new(k as f32 * 1e-6, (k / 4) as f32 * 1e-6, 0.0), tmin: 0.0, tmax: f32::INFINITY })
+        .collect();
+    let mut ps = rothray::engine::PacketScratch::default();
+    let mut out = [None; 8];
+    scene.intersect_packet(&packet, &mut ps, &mut out);
+    let mut grazing = 0;
+    for k in 0..8 {
+        let one = scene.intersect(&packet[k]);
+        let key = |h: Option<rothray::engine::Hit>| h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub));
+        assert_eq!(key(out[k]), key(one), "lane {k}: packet {:?} single {:?}", out[k], one);
+        grazing += one.is_some_and(|h| h.leaf == 0) as usize;
+    }
+    assert!(grazing > 0, "the packet should hold grazing rays that end on the ball");
+}

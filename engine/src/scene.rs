@@ -1003,6 +1003,10 @@ impl RenderScene {
             match spans.first() {
                 // Inside at `tmin`: the shortcut does not reason about that.
                 Some(s) if !s.s0.is_real() => return None,
+                // A first span no longer than eps is dropped by `combine` when
+                // the evaluation meets any other operand, however far: the full
+                // evaluation decides it.
+                Some(s) if s.t1 - s.t0 <= 2.0 * ctx.eps => return None,
                 Some(s) => {
                     clear[j] = s.t0;
                     if best.is_none_or(|b| s.t0 < b.0) {
