@@ -279,3 +279,53 @@ fn packet_shortcut_keeps_the_short_span_rule() {
     }
     assert!(grazing > 0, "the packet should hold grazing rays that end on the ball");
 }
+
+#[test]
+fn packets_and_single_rays_match_the_full_diagram_fuzz() {
+    // 40 seeds x 60 random scenes x 20 packets (wide and narrow, a fifth of
+    // them starting inside the unit region): every packet lane equals the
+    // single-ray hit, and that equals the first surface of the full Roth
+    // diagrams. Found in review: single rays starting inside a union whose
+    // first operand ended where the evaluation stopped being exact took that
+    // end (fused with the second operand's cut-off span) as their exit.
+    use rand::Rng;
+    let (mut rays, mut inside) = (0, 0);
+    for seed in 0..40u64 {
+        let mut rng = SmallRng::seed_from_u64(0xabc0 + seed);
+        for case in 0..60 {
+            let mut trees = vec![random_tree_with(&mut rng, 3, true)];
+            if case % 3 == 0 {
+                trees.push(random_tree_with(&mut rng, 2, true));
+            }
+            let scene = bake(&trees);
+            remove_mesh_files(&trees);
+            let mut ps = rothray::engine::PacketScratch::default();
+            for p in 0..20 {
+                let (o, d) = random_ray(&mut rng);
+                let s = if p % 4 == 0 { 0.05 } else { 0.003 * rng.gen_range(0.01..1.0) };
+                let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
+                let dl = d.length();
+                let packet: Vec<rothray::engine::Ray> =
+                    (0..8).map(|k| to_ray(o, d + (u * (k % 4) as f64 + v * (k / 4) as f64) * s * dl)).collect();
+                let mut out = [None; 8];
+                scene.intersect_packet(&packet, &mut ps, &mut out);
+                for k in 0..8 {
+                    let one = scene.intersect(&packet[k]);
+                    let key = |h: Option<rothray::engine::Hit>| h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub));
+                    let ctx = || format!("seed {:#x} case {case} packet {p} ray {k}: {:?} trees {:?}", 0xabc0 + seed, packet[k], trees.iter().map(|t| t.json()).collect::<Vec<_>>());
+                    assert_eq!(key(out[k]), key(one), "packet vs single ray, {}", ctx());
+                    let spans: Vec<_> = (0..trees.len() as u32).map(|oi| scene.spans(&packet[k], oi)).collect();
+                    inside += spans.iter().any(|v| v.first().is_some_and(|s| !s.s0.is_real())) as usize;
+                    let want = spans
+                        .iter()
+                        .filter_map(|v| v.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None }))
+                        .fold(None, |a: Option<f32>, t| Some(a.map_or(t, |a| a.min(t))));
+                    assert_eq!(one.map(|h| h.t), want, "single ray vs full diagram, {}", ctx());
+                    rays += 1;
+                }
+            }
+        }
+    }
+    println!("{rays} rays, {inside} starting inside an object");
+    assert!(rays == 384_000 && inside > 10_000);
+}

@@ -764,7 +764,15 @@ impl RenderScene {
         let root = self.objects[oi as usize].root;
         let valid = self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
-        if f.is_none() && valid < tmax {
+        // An exit (the ray starts inside) close to where the result stops being
+        // exact is not sure: an operand cut short there ends its span at
+        // `valid` with no surface, and `combine` fuses that end with a real one
+        // of another operand (found by a packet-against-single-ray fuzz: a
+        // union's exit at its first operand's end while the second went on).
+        let unsure_exit = f.is_some_and(|(t, _)| {
+            scratch.out.as_slice().first().is_some_and(|s| !s.s0.is_real()) && t >= valid - 16.0 * ctx.eps
+        });
+        if (f.is_none() || unsure_exit) && valid < tmax {
             // Nothing sure before `valid` (a union's entry covered by another
             // operand, a mesh's first span cut away by a difference): redo in
             // full. With meshes, first up to a tenth of the object's size past
