@@ -288,8 +288,9 @@ pub struct PacketScratch {
     memo: PacketMemo,
     /// Rays answered by the packet shortcut so far (for tests).
     pub shortcuts: u64,
-    /// Packet rays whose mesh walks went on through a subtracted leaf so far
-    /// (for tests).
+    /// Packet rays given an interval to walk on through (they meet a
+    /// subtracted cheap leaf; the walk holds on only where the first mesh
+    /// crossing lies inside it) so far (for tests).
     pub throughs: u64,
     /// Per cutter (see `Shortcut::cutters`) and lane, its first span on the
     /// ray's range, where `cut_done` has the lane's bit.
