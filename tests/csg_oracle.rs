@@ -183,7 +183,7 @@ fn random_csg_with_meshes_packets_match_single_rays() {
     }
     println!("{rays} rays in packets, {hits} hits, {packed_scenes} scenes with meshes");
     println!("{covered_scenes} scenes inside packet meshes, {covered_misses} missing rays there");
-    println!("{shortcuts} rays answered by the packet shortcut, {throughs} whose mesh walks held on through a subtracted leaf");
+    println!("{shortcuts} rays answered by the packet shortcut, {throughs} given an interval to walk on through a subtracted leaf");
     assert!(hits > 1000 && packed_scenes > 70 && covered_misses > 500 && shortcuts > 500 && throughs > 50);
 }
 
@@ -248,7 +248,7 @@ fn bitten_mesh_packets_match_single_rays() {
         assert_eq!(out[k].map(|h| (h.t.to_bits(), h.leaf)), one.map(|h| (h.t.to_bits(), h.leaf)), "unusable-ray packet, lane {k}");
     }
     assert!(out[0].is_some(), "the packet is aimed at the mesh");
-    println!("{rays} rays, {hits} hits, {} by the packet shortcut, {} mesh walks held on through the bite (two queries per ray)", ps.shortcuts, ps.throughs);
+    println!("{rays} rays, {hits} hits, {} by the packet shortcut, {} given an interval to walk on through the bite (two queries per ray)", ps.shortcuts, ps.throughs);
     assert!(hits > 10_000 && ps.shortcuts > 10_000 && ps.throughs > 500);
 }
 
