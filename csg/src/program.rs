@@ -88,16 +88,18 @@ impl RayCtx<'static> {
 }
 
 impl RayCtx<'_> {
-    /// The same ray, served by lane `k` of `memo` where it can be.
+    /// The slack of a leaf query in [`Mode::Nearest`] for a ray of tolerance
+    /// `eps` (what [`RayCtx::nearest_slack`] gives it; for packet queries made
+    /// before the contexts).
     #[inline]
-    pub fn with_memo<'b>(&self, memo: &'b PacketMemo, k: usize) -> RayCtx<'b> {
-        RayCtx { o: self.o, d: self.d, inv_d: self.inv_d, eps: self.eps, memo: Some((memo, k)) }
+    pub fn nearest_slack_of(eps: f32) -> f32 {
+        4.0 * eps
     }
 
     /// The slack of a leaf query in [`Mode::Nearest`].
     #[inline]
     pub fn nearest_slack(&self) -> f32 {
-        4.0 * self.eps
+        Self::nearest_slack_of(self.eps)
     }
 
     /// The slack a leaf may stop at past its first entry in `mode` (`None`: all spans).
@@ -170,20 +172,18 @@ impl PacketMemo {
         }
     }
 
-    /// Is `leaf` known to have no span on `[lo, hi]` for lane `k` (its recorded
-    /// query covers the range, is exact on all of it and found nothing)?
+    /// The record of `leaf`, if it was added.
     #[inline]
-    pub fn empty(&self, k: usize, leaf: u32, lo: f32, hi: f32) -> bool {
-        self.leaves[..self.len].iter().find(|e| e.leaf == leaf).is_some_and(|e| {
-            e.done & (1 << k) != 0 && lo >= e.tmin[k] && hi <= e.tmax[k] && e.valid[k] >= hi && e.spans[k].is_empty()
-        })
+    fn entry(&self, leaf: u32) -> Option<&MemoLeaf> {
+        self.leaves[..self.len].iter().find(|e| e.leaf == leaf)
     }
 
-    /// [`PacketMemo::empty`] for all eight lanes at once (one lookup): bit `k`
-    /// set when lane `k` is known empty on `[lo[k], hi[k]]`.
+    /// Which lanes are known to have no span of `leaf` on `[lo[k], hi[k]]`
+    /// (their recorded query covers the range, is exact on all of it and found
+    /// nothing): bit `k` for lane `k`.
     #[inline]
     pub fn empty8(&self, leaf: u32, lo: &[f32; 8], hi: &[f32; 8]) -> u32 {
-        let Some(e) = self.leaves[..self.len].iter().find(|e| e.leaf == leaf) else { return 0 };
+        let Some(e) = self.entry(leaf) else { return 0 };
         let mut m = 0;
         for k in 0..8 {
             let empty = lo[k] >= e.tmin[k] && hi[k] <= e.tmax[k] && e.valid[k] >= hi[k] && e.spans[k].is_empty();
@@ -192,24 +192,17 @@ impl PacketMemo {
         m & e.done
     }
 
-    /// Lane `k`'s recorded spans of `leaf` (on its whole query range) and where
-    /// they stop being exact, when that lane is done.
-    #[inline]
-    pub fn lane(&self, k: usize, leaf: u32) -> Option<(&[Span], f32)> {
-        self.lanes(leaf)?.get(k)
-    }
-
     /// Every lane's record of `leaf` (one lookup for a packet's eight rays).
     #[inline]
     pub fn lanes(&self, leaf: u32) -> Option<MemoLanes<'_>> {
-        self.leaves[..self.len].iter().find(|e| e.leaf == leaf).map(MemoLanes)
+        self.entry(leaf).map(MemoLanes)
     }
 
     /// Lane `k`'s spans of `leaf` on `[lo, hi]` and where they stop being exact,
     /// when the recorded query covers that range (`None`: ask the leaf).
     #[inline]
     fn serve<S: SpanSink + ?Sized>(&self, k: usize, leaf: u32, lo: f32, hi: f32, out: &mut S) -> Option<f32> {
-        let e = self.leaves[..self.len].iter().find(|e| e.leaf == leaf)?;
+        let e = self.entry(leaf)?;
         let v = e.valid[k];
         if e.done & (1 << k) == 0 || !(lo >= e.tmin[k] && hi <= e.tmax[k] && lo <= v) {
             return None;

@@ -858,7 +858,7 @@ impl RenderScene {
         let eps: [f32; 8] = std::array::from_fn(|k| ew / d[k].length());
         let tmin: [f32; 8] = std::array::from_fn(|k| rays[k].tmin);
         let tmax: [f32; 8] = std::array::from_fn(|k| rays[k].tmax);
-        let slack: [f32; 8] = std::array::from_fn(|k| 4.0 * eps[k]);
+        let slack: [f32; 8] = std::array::from_fn(|k| RayCtx::nearest_slack_of(eps[k]));
         // A ray through a subtracted analytic leaf keeps walking the meshes to
         // where that leaf ends when their first crossing lies inside it (the
         // nearest-mode answer would be cut away there: with the crossings up to
