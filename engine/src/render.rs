@@ -272,13 +272,9 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     const ROWS: usize = 4;
     let shadow_total = AtomicUsize::new(0);
     let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
-    let lut = srgb_table();
     let encode = |c: Vec3| -> [u8; 3] {
         match s.aov {
-            Aov::Shaded => {
-                let q = |x: f32| lut[(x.clamp(0.0, 1.0) * 4095.0 + 0.5) as usize];
-                [q(c.x), q(c.y), q(c.z)]
-            }
+            Aov::Shaded => encode_srgb(c),
             _ => {
                 let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
                 [q(c.x), q(c.y), q(c.z)]
