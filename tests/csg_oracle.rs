@@ -18,7 +18,7 @@ fn check_random_ray(scene: &RenderScene, tree: &Shape, rng: &mut SmallRng, ctx: 
     check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("{ctx} tree {}", tree.json()), st);
     // The nearest hit is the first real surface of the Roth diagram.
     let hit = scene.intersect(&ray);
-    let expect = spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None });
+    let expect = first_surface_t(&spans);
     assert_eq!(hit.map(|h| h.t), expect, "{ctx}: nearest hit vs spans {spans:?} tree {}", tree.json());
     hit.is_some()
 }
@@ -153,28 +153,17 @@ fn random_csg_with_meshes_packets_match_single_rays() {
         for p in 0..20 {
             let (o, d) = random_ray(&mut rng);
             // Spread like a 4x2 block of pixels, wide or narrow.
-            let s = if p % 4 == 0 { 0.05 } else { 0.003 };
-            let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
-            let dl = d.length();
-            let packet: Vec<rothray::engine::Ray> =
-                (0..8).map(|k| to_ray(o, d + (u * (k % 4) as f64 + v * (k / 4) as f64) * s * dl)).collect();
+            let packet = packet_around(o, d, if p % 4 == 0 { 0.05 } else { 0.003 });
             let mut out = [None; 8];
             scene.intersect_packet(&packet, &mut ps, &mut out);
             for k in 0..8 {
                 let one = scene.intersect(&packet[k]);
-                let key = |h: Option<rothray::engine::Hit>| h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub));
-                assert_eq!(key(out[k]), key(one), "case {case} packet {p} ray {k}: {:?} trees {:?}", packet[k], trees.iter().map(|t| t.json()).collect::<Vec<_>>());
+                assert_eq!(hit_key(out[k]), hit_key(one), "case {case} packet {p} ray {k}: {:?} trees {:?}", packet[k], trees.iter().map(|t| t.json()).collect::<Vec<_>>());
                 rays += 1;
                 hits += one.is_some() as usize;
                 covered_misses += (scene.packet_covered() && one.is_none()) as usize;
                 // And the first surface of each object's full diagram.
-                let firsts: Vec<f32> = (0..trees.len() as u32)
-                    .filter_map(|oi| {
-                        let sp = scene.spans(&packet[k], oi);
-                        sp.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None })
-                    })
-                    .collect();
-                let want = firsts.iter().copied().fold(None, |a: Option<f32>, t| Some(a.map_or(t, |a| a.min(t))));
+                let want = nearest_in_diagrams(&scene, &packet[k], trees.len());
                 assert_eq!(one.map(|h| h.t), want, "case {case} packet {p} ray {k}: nearest vs spans");
             }
         }
@@ -273,8 +262,7 @@ fn packet_shortcut_keeps_the_short_span_rule() {
     let mut grazing = 0;
     for k in 0..8 {
         let one = scene.intersect(&packet[k]);
-        let key = |h: Option<rothray::engine::Hit>| h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub));
-        assert_eq!(key(out[k]), key(one), "lane {k}: packet {:?} single {:?}", out[k], one);
+        assert_eq!(hit_key(out[k]), hit_key(one), "lane {k}: packet {:?} single {:?}", out[k], one);
         grazing += one.is_some_and(|h| h.leaf == 0) as usize;
     }
     assert!(grazing > 0, "the packet should hold grazing rays that end on the ball");
@@ -302,24 +290,15 @@ fn packets_and_single_rays_match_the_full_diagram_fuzz() {
             let mut ps = rothray::engine::PacketScratch::default();
             for p in 0..20 {
                 let (o, d) = random_ray(&mut rng);
-                let s = if p % 4 == 0 { 0.05 } else { 0.003 * rng.gen_range(0.01..1.0) };
-                let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
-                let dl = d.length();
-                let packet: Vec<rothray::engine::Ray> =
-                    (0..8).map(|k| to_ray(o, d + (u * (k % 4) as f64 + v * (k / 4) as f64) * s * dl)).collect();
+                let packet = packet_around(o, d, if p % 4 == 0 { 0.05 } else { 0.003 * rng.gen_range(0.01..1.0) });
                 let mut out = [None; 8];
                 scene.intersect_packet(&packet, &mut ps, &mut out);
                 for k in 0..8 {
                     let one = scene.intersect(&packet[k]);
-                    let key = |h: Option<rothray::engine::Hit>| h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub));
                     let ctx = || format!("seed {:#x} case {case} packet {p} ray {k}: {:?} trees {:?}", 0xabc0 + seed, packet[k], trees.iter().map(|t| t.json()).collect::<Vec<_>>());
-                    assert_eq!(key(out[k]), key(one), "packet vs single ray, {}", ctx());
-                    let spans: Vec<_> = (0..trees.len() as u32).map(|oi| scene.spans(&packet[k], oi)).collect();
-                    inside += spans.iter().any(|v| v.first().is_some_and(|s| !s.s0.is_real())) as usize;
-                    let want = spans
-                        .iter()
-                        .filter_map(|v| v.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None }))
-                        .fold(None, |a: Option<f32>, t| Some(a.map_or(t, |a| a.min(t))));
+                    assert_eq!(hit_key(out[k]), hit_key(one), "packet vs single ray, {}", ctx());
+                    inside += (0..trees.len() as u32).any(|oi| scene.spans(&packet[k], oi).first().is_some_and(|s| !s.s0.is_real())) as usize;
+                    let want = nearest_in_diagrams(&scene, &packet[k], trees.len());
                     assert_eq!(one.map(|h| h.t), want, "single ray vs full diagram, {}", ctx());
                     rays += 1;
                 }

@@ -372,6 +372,30 @@ pub fn to_ray(o: DVec3, d: DVec3) -> Ray {
     Ray { origin: o.as_vec3(), dir: d.as_vec3(), tmin: 0.0, tmax: f32::INFINITY }
 }
 
+/// Eight rays from `o` spread around `d` like a 4x2 block of pixels, `s` (of
+/// |d|) apart: the renderer's packets.
+pub fn packet_around(o: DVec3, d: DVec3, s: f64) -> Vec<Ray> {
+    let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
+    let dl = d.length();
+    (0..8).map(|k| to_ray(o, d + (u * (k % 4) as f64 + v * (k / 4) as f64) * s * dl)).collect()
+}
+
+/// A hit compared bit for bit: t, object, leaf, surface.
+pub fn hit_key(h: Option<rothray::engine::Hit>) -> Option<(u32, u32, u32, u32)> {
+    h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub))
+}
+
+/// The nearest-hit answer a span list gives: its first real surface (the
+/// entry, or the exit of a span that starts at the ray's start).
+pub fn first_surface_t(spans: &[Span]) -> Option<f32> {
+    spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None })
+}
+
+/// The nearest of the first surfaces of objects `0..n`' full diagrams.
+pub fn nearest_in_diagrams(scene: &RenderScene, ray: &Ray, n: usize) -> Option<f32> {
+    (0..n as u32).filter_map(|oi| first_surface_t(&scene.spans(ray, oi))).fold(None, |a: Option<f32>, t| Some(a.map_or(t, |a| a.min(t))))
+}
+
 /// Is `p` within `r` of the solid's boundary (both inside and outside points in the ball)?
 /// For grazing rays the crossing is ill-conditioned along the ray, but the point
 /// must still lie on the surface.
