@@ -385,7 +385,10 @@ impl<'a> ProgramBuilder<'a> {
 impl Program {
     /// Evaluates node `root` on the ray over `[tmin, tmax]`; the spans land in
     /// `scratch.out`. Returns the parameter up to which the result is exact
-    /// (`tmax` unless [`Mode::Nearest`] let a union stop early).
+    /// (`tmax` unless [`Mode::Nearest`] let a union stop early). A boundary
+    /// within a few eps of that limit is not sure: an operand cut short there
+    /// ends its span with no surface, and `combine` may fuse that end with a
+    /// real boundary of another operand.
     pub fn eval(
         &self,
         leaves: &LeafTable,

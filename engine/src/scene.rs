@@ -766,10 +766,10 @@ impl RenderScene {
         let valid = self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
         // An exit (the ray starts inside) close to where the result stops being
-        // exact is not sure: an operand cut short there ends its span at
-        // `valid` with no surface, and `combine` fuses that end with a real one
-        // of another operand (found by a packet-against-single-ray fuzz: a
-        // union's exit at its first operand's end while the second went on).
+        // exact is not sure (see `Program::eval`; found by a packet-against-
+        // single-ray fuzz: a union's exit at its first operand's end while the
+        // second went on). An entry there cannot be: a span starting at the
+        // limit has no length.
         let unsure_exit = f.is_some_and(|(t, _)| {
             scratch.out.as_slice().first().is_some_and(|s| !s.s0.is_real()) && t >= valid - 16.0 * ctx.eps
         });
