@@ -18,6 +18,8 @@
 
 pub mod program;
 pub mod spans;
+pub mod tile;
 
 pub use program::{first_surface, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 pub use spans::{combine, spill_count, Op, SpanList};
+pub use tile::{TileCounts, TileProgram};

@@ -2,8 +2,15 @@
 //! before parents), evaluated per ray without recursion (so a nesting depth of
 //! 10 000 is fine) with Roth's early outs and a BVH inside every wide node.
 
+use std::sync::Arc;
+
 use glam::Vec3;
-use rothray_primitives::{bvh::FlatBvh, table::push_clipped, Aabb, LeafTable, Span, SpanSink, Surf};
+use rothray_primitives::{
+    bvh::FlatBvh,
+    polytope::{polytope_box, Plane},
+    table::push_clipped,
+    Aabb, LeafKind, LeafTable, Span, SpanSink, Surf,
+};
 
 use crate::spans::{combine_into, Op, SpanList};
 
@@ -41,6 +48,10 @@ pub struct Wide {
     pub bvh: FlatBvh,
     /// Positions of children with unbounded boxes (always visited).
     pub unbounded: Vec<u32>,
+    /// A binary tree over the same boxes for region queries (tiles ask it
+    /// which children their rays can meet; the `CwBvh` of `bvh` has no such
+    /// query).
+    pub cull: FlatBvh,
 }
 
 /// All CSG trees of a scene, SoA, children before parents.
@@ -60,8 +71,10 @@ pub struct Program {
     pub leafy: Vec<bool>,
     /// Child node ids of the inner nodes.
     pub children: Vec<u32>,
-    /// BVHs of wide nodes.
-    pub wides: Vec<Wide>,
+    /// BVHs of wide nodes (shared with the per-tile copies of the program).
+    pub wides: Arc<Vec<Wide>>,
+    /// Tells bakes apart (per-tile copies follow the program they copy).
+    pub id: u64,
 }
 
 /// Per-ray constants.
@@ -328,15 +341,8 @@ impl<'a> ProgramBuilder<'a> {
                 flat.push(c);
             }
         }
+        let bounds = self.node_bounds(kind, &flat);
         let p = &mut self.program;
-        let bounds = match kind {
-            NodeKind::Union => flat.iter().fold(Aabb::EMPTY, |b, &c| b.union(&p.bounds[c as usize])),
-            NodeKind::Intersection => {
-                flat.iter().fold(Aabb::INFINITE, |b, &c| b.intersection(&p.bounds[c as usize]))
-            }
-            _ => p.bounds[flat[0] as usize],
-        };
-        let bounds = if bounds.is_empty() { Aabb::EMPTY } else { bounds };
         let first = p.children.len() as u32;
         p.children.extend_from_slice(&flat);
         // A BVH for wide unions (all children) and wide differences (subtrahends).
@@ -362,8 +368,12 @@ impl<'a> ProgramBuilder<'a> {
             for x in bvh.prims.iter_mut() {
                 *x = ids[*x as usize];
             }
+            let mut cull = FlatBvh::build_binary(&boxes, 4);
+            for x in cull.prims.iter_mut() {
+                *x = ids[*x as usize];
+            }
             wide = p.wides.len() as u32;
-            p.wides.push(Wide { bvh, unbounded });
+            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, cull });
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);
@@ -376,8 +386,69 @@ impl<'a> ProgramBuilder<'a> {
         id
     }
 
+    /// Bounds of a new node over `flat` by Roth's rules: a union encloses its
+    /// operands, an intersection is their overlap, a difference its positive
+    /// operand. Half-spaces and boxes (under any affine map) among the operands
+    /// of an intersection are kept as planes, and so are half-spaces subtracted
+    /// from a difference (as their complements): the box is then that of the
+    /// polytope they cut from the other operands' box ([`polytope_box`]), so an
+    /// intersection of half-spaces alone gets a finite box.
+    fn node_bounds(&self, kind: NodeKind, flat: &[u32]) -> Aabb {
+        let p = &self.program;
+        let mut planes = Vec::new();
+        let leaf_planes = |c: u32, flip: bool, planes: &mut Vec<Plane>| -> (bool, bool) {
+            if p.kind[c as usize] != NodeKind::Leaf {
+                return (false, false);
+            }
+            let at = planes.len();
+            let leaf = p.first[c as usize];
+            let is_half = self.leaves.kind[leaf as usize] == LeafKind::HalfSpace;
+            if flip && !is_half {
+                return (false, false); // a box's complement is not convex
+            }
+            let poly = self.leaves.world_planes(leaf, planes);
+            if flip {
+                for q in &mut planes[at..] {
+                    *q = q.flipped();
+                }
+            }
+            (poly, is_half)
+        };
+        let bounds = match kind {
+            NodeKind::Union => flat.iter().fold(Aabb::EMPTY, |b, &c| b.union(&p.bounds[c as usize])),
+            NodeKind::Intersection => {
+                // Worth it with a half-space, or with two boxes (rotated boxes
+                // overlap in less than the overlap of their boxes).
+                let (mut half, mut polys) = (false, 0);
+                for &c in flat {
+                    let (poly, h) = leaf_planes(c, false, &mut planes);
+                    half |= h;
+                    polys += poly as u32;
+                }
+                let clip = flat.iter().fold(Aabb::INFINITE, |b, &c| b.intersection(&p.bounds[c as usize]));
+                if half || polys >= 2 { polytope_box(&planes, &clip) } else { clip }
+            }
+            _ => {
+                let mut half = false;
+                for &c in &flat[1..] {
+                    half |= leaf_planes(c, true, &mut planes).1;
+                }
+                let clip = p.bounds[flat[0] as usize];
+                if half {
+                    leaf_planes(flat[0], false, &mut planes);
+                    polytope_box(&planes, &clip)
+                } else {
+                    clip
+                }
+            }
+        };
+        if bounds.is_empty() { Aabb::EMPTY } else { bounds }
+    }
+
     /// Finishes.
-    pub fn finish(self) -> Program {
+    pub fn finish(mut self) -> Program {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        self.program.id = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.program
     }
 }

@@ -29,9 +29,11 @@
 pub mod components;
 pub mod render;
 pub mod scene;
+pub mod tile;
 
 pub use components::*;
 pub use render::{encode_srgb, leaf_id_color, render, Aov, Camera, CameraRays, Light, RenderSettings, RenderStats};
+pub use tile::{TileScratch, TileStats, TileView};
 pub use scene::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError, Hit, LeafInfo, ObjectInfo, PacketScratch, Ray, RenderScene};
 pub use glam;
 pub use hecs;

@@ -7,6 +7,8 @@ use rayon::prelude::*;
 use rothray_csg::Scratch;
 
 use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
+use crate::tile::{TileScratch, TileStats};
+use rothray_primitives::frustum::Frustum;
 
 /// Pinhole camera of the scene format.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -163,6 +165,8 @@ pub struct RenderStats {
     pub primary_rays: u64,
     /// Shadow rays traced.
     pub shadow_rays: u64,
+    /// What the tile level skipped.
+    pub tiles: TileStats,
 }
 
 #[inline]
@@ -221,38 +225,35 @@ fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, s
     Sample { rgb, depth: h.t }
 }
 
-const TILE_W: usize = 16;
+/// Tile size in pixels (width, height): the rays of a tile share one
+/// specialised program (see `crate::tile`). `ROTHRAY_TILE=WxH` overrides it
+/// for measurements.
+const TILE: (usize, usize) = (16, 8);
 
-/// The planes through the eye that bound tiles: every ray through image column
-/// `x` lies in one plane, every ray through row `y` in another. Unit normals,
-/// facing increasing x (`col`) and decreasing y (`row`, up the picture).
-impl CameraRays {
-    fn col_plane(&self, x: f32) -> Vec3 {
-        let u = 2.0 * x / self.w - 1.0;
-        (self.fwd + self.right * u).cross(self.up).normalize_or_zero()
-    }
-
-    fn row_plane(&self, y: f32) -> Vec3 {
-        let v = 1.0 - 2.0 * y / self.h;
-        self.right.cross(self.fwd + self.up * v).normalize_or_zero()
-    }
+fn tile_size() -> (usize, usize) {
+    let parse = |v: String| -> Option<(usize, usize)> {
+        let (a, b) = v.split_once('x')?;
+        let (w, h): (usize, usize) = (a.parse().ok()?, b.parse().ok()?);
+        (w >= 4 && h >= 2 && w % 4 == 0 && h % 2 == 0).then_some((w, h))
+    };
+    std::env::var("ROTHRAY_TILE").ok().and_then(parse).unwrap_or(TILE)
 }
 
-/// Does the pyramid from the eye between the column planes `left`, `right` and
-/// the row planes `top`, `bottom` ([`CameraRays::col_plane`], `row_plane`)
-/// touch the box? Conservative: a p-vertex test per plane, and the plane
-/// through the eye facing the view (without it a box behind the camera passes
-/// the four side planes, each with its own corner).
-fn pyramid_touches(rays: &CameraRays, left: Vec3, right: Vec3, top: Vec3, bottom: Vec3, b: &rothray_primitives::Aabb) -> bool {
-    let eye = rays.eye;
-    for n in [rays.fwd, left, -right, bottom, -top] {
-        // The box corner farthest along n.
-        let p = Vec3::select(n.cmpge(Vec3::ZERO), b.max, b.min);
-        if n.dot(p - eye) < -1e-6 * (1.0 + (p - eye).length()) {
-            return false;
-        }
+impl CameraRays {
+    /// The (unnormalised) direction through image point `(x, y)`, as in
+    /// [`CameraRays::ray`].
+    fn dir(&self, x: f32, y: f32) -> Vec3 {
+        let u = 2.0 * x / self.w - 1.0;
+        let v = 1.0 - 2.0 * y / self.h;
+        self.fwd + self.right * u + self.up * v
     }
-    true
+
+    /// The region of every ray through the pixels `[x0, x1) x [y0, y1)`
+    /// (jittered samples included).
+    fn tile_region(&self, x0: usize, x1: usize, y0: usize, y1: usize) -> Frustum {
+        let (x0, x1, y0, y1) = (x0 as f32, x1 as f32, y0 as f32, y1 as f32);
+        Frustum::pyramid(self.eye, [self.dir(x0, y0), self.dir(x1, y0), self.dir(x1, y1), self.dir(x0, y1)])
+    }
 }
 
 /// Renders into an RGB8 buffer (`width * height * 3`, rows top to bottom).
@@ -269,8 +270,9 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     let want_depth = s.aov == Aov::Depth;
     let mut depth = if want_depth { vec![f32::INFINITY; w * h] } else { Vec::new() };
     let done = AtomicUsize::new(0);
-    const ROWS: usize = 4;
+    let (tile_w, rows) = tile_size();
     let shadow_total = AtomicUsize::new(0);
+    let tile_total = std::sync::Mutex::new(TileStats::default());
     let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
     let encode = |c: Vec3| -> [u8; 3] {
         match s.aov {
@@ -288,35 +290,21 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
         .then(|| scene.leaf_info.iter().map(|li| encode(Vec3::ZERO + li.color * Vec3::splat(s.ambient))).collect());
     // Only lights and the normal picture read a hit's normal.
     let normals = s.aov == Aov::Normal || (s.aov == Aov::Shaded && !s.lights.is_empty());
-    // Tiles whose pyramid of rays misses every object's bounds are background: no
-    // ray is traced. Objects are tested one by one when there are few of them
-    // (scenes/sampler: three objects spread over the picture), else the scene box.
-    let cull = scene.all_bounded() && !scene.bounds.is_empty();
-    let cull_boxes: Vec<rothray_primitives::Aabb> = if scene.objects.len() <= 32 {
-        scene.objects.iter().map(|o| o.bounds).filter(|b| !b.is_empty()).collect()
-    } else {
-        vec![scene.bounds]
-    };
-    // The column planes of the tiles' sides (made once: each is shared by two
-    // tiles of every row of tiles).
-    let col_planes: Vec<Vec3> = if cull { (0..=w.div_ceil(TILE_W)).map(|i| rays.col_plane((i * TILE_W).min(w) as f32)).collect() } else { Vec::new() };
-    let nchunks = h.div_ceil(ROWS);
+    // Each tile finds the objects its rays can meet and specialises their
+    // programs (`RenderScene::prepare_tile`); a tile that meets none is
+    // background, and no ray of it is traced.
+    let nchunks = h.div_ceil(rows);
     let mut dchunks: Vec<Option<&mut [f32]>> =
-        if want_depth { depth.chunks_mut(w * ROWS).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
-    out.par_chunks_mut(w * ROWS * 3).zip(dchunks.par_iter_mut()).enumerate().for_each_init(
-        PacketScratch::default,
-        |ps, (chunk, (orows, drows))| {
+        if want_depth { depth.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
+    out.par_chunks_mut(w * rows * 3).zip(dchunks.par_iter_mut()).enumerate().for_each_init(
+        || (PacketScratch::default(), TileScratch::default()),
+        |(ps, ts), (chunk, (orows, drows))| {
             let mut shadows = 0u64;
-            let y0 = chunk * ROWS;
+            let y0 = chunk * rows;
             let rows_here = orows.len() / (3 * w);
-            let (top, bottom) =
-                if cull { (rays.row_plane(y0 as f32), rays.row_plane((y0 + rows_here) as f32)) } else { (Vec3::ZERO, Vec3::ZERO) };
-            for x0 in (0..w).step_by(TILE_W) {
-                let x1 = (x0 + TILE_W).min(w);
-                if cull && {
-                    let (l, r) = (col_planes[x0 / TILE_W], col_planes[x0 / TILE_W + 1]);
-                    !cull_boxes.iter().any(|b| pyramid_touches(&rays, l, r, top, bottom, b))
-                } {
+            for x0 in (0..w).step_by(tile_w) {
+                let x1 = (x0 + tile_w).min(w);
+                if !scene.prepare_tile(&rays.tile_region(x0, x1, y0, y0 + rows_here), ts) {
                     if bg8 != [0; 3] {
                         for r in 0..rows_here {
                             for px in orows[3 * (r * w + x0)..3 * (r * w + x1)].chunks_exact_mut(3) {
@@ -362,7 +350,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                             let rs = rays.ray8(&fx, &fy);
                             let rs = &rs[..np];
                             let mut hits = [None; 8];
-                            scene.intersect_packet_with(rs, ps, &mut hits, normals);
+                            scene.intersect_packet_with(rs, ps, &mut hits, normals, Some(&ts.view()));
                             if spp == 1 && hits.iter().all(Option::is_none) {
                                 // Background only (most packets of a frame): the
                                 // pixels are `bg8`, the depths stay infinite.
@@ -409,6 +397,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                 }
             }
             shadow_total.fetch_add(shadows as usize, Ordering::Relaxed);
+            tile_total.lock().expect("tile counts").add(&ts.take_counts());
             let d = done.fetch_add(rows_here, Ordering::Relaxed) + rows_here;
             progress(d, h);
         },
@@ -428,7 +417,11 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
             out[i * 3..i * 3 + 3].copy_from_slice(&[g, g, g]);
         }
     }
-    let stats = RenderStats { primary_rays: (w * h) as u64 * spp as u64, shadow_rays: shadow_total.into_inner() as u64 };
+    let stats = RenderStats {
+        primary_rays: (w * h) as u64 * spp as u64,
+        shadow_rays: shadow_total.into_inner() as u64,
+        tiles: tile_total.into_inner().expect("tile counts"),
+    };
     (out, stats)
 }
 

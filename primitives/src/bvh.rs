@@ -196,6 +196,41 @@ impl FlatBvh {
         }
     }
 
+    /// Visits every primitive of a leaf whose box, and every ancestor's box,
+    /// passes `test` (a superset of the primitives whose own box passes: callers
+    /// test those themselves). Binary trees ([`FlatBvh::build_binary`]) walk
+    /// their nodes; a `CwBvh` tests its input boxes one by one and, like
+    /// [`FlatBvh::point_query`], reports input positions.
+    pub fn cull(&self, mut test: impl FnMut(&Aabb) -> bool, mut f: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        if self.cw.is_some() {
+            for (i, b) in self.boxes.iter().enumerate() {
+                if test(b) {
+                    f(i as u32);
+                }
+            }
+            return;
+        }
+        let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
+        stack.push(0);
+        while let Some(ni) = stack.pop() {
+            let n = &self.nodes[ni as usize];
+            if !test(&Aabb::new(n.min, n.max)) {
+                continue;
+            }
+            if n.count > 0 {
+                for k in n.first..n.first + n.count {
+                    f(self.prims[k as usize]);
+                }
+            } else {
+                stack.push(n.first + 1);
+                stack.push(n.first);
+            }
+        }
+    }
+
     /// Visits every primitive whose leaf box contains `p` (a superset is fine:
     /// callers test the primitive itself). Walks a short ray through `p`.
     pub fn point_query(&self, p: Vec3, mut f: impl FnMut(u32)) {
