@@ -73,6 +73,11 @@ pub struct Program {
     pub children: Vec<u32>,
     /// BVHs of wide nodes (shared with the per-tile copies of the program).
     pub wides: Arc<Vec<Wide>>,
+    /// Wide nodes of a tile's own (indices from `wides.len()` on; see
+    /// [`crate::TileProgram`]); the first `local_len` are in use.
+    pub local_wides: Vec<Wide>,
+    /// How many of `local_wides` are in use.
+    pub local_len: usize,
     /// Tells bakes apart (per-tile copies follow the program they copy).
     pub id: u64,
 }
@@ -454,6 +459,16 @@ impl<'a> ProgramBuilder<'a> {
 }
 
 impl Program {
+    /// The BVH of wide node `n`.
+    #[inline(always)]
+    fn wide_of(&self, n: usize) -> &Wide {
+        let w = self.wide[n] as usize;
+        match self.wides.get(w) {
+            Some(x) => x,
+            None => &self.local_wides[w - self.wides.len()],
+        }
+    }
+
     /// Evaluates node `root` on the ray over `[tmin, tmax]`; the spans land in
     /// `scratch.out`. Returns the parameter up to which the result is exact
     /// (`tmax` unless [`Mode::Nearest`] let a union stop early). A boundary
@@ -707,7 +722,7 @@ impl Program {
         tmp: &mut SpanList,
         acc: &mut SpanList,
     ) -> f32 {
-        let w = &self.wides[self.wide[n] as usize];
+        let w = self.wide_of(n);
         let first = self.first[n];
         // `hi`: the working range's end; `valid`: where the result stops being exact.
         let mut hi = tmax;
@@ -749,7 +764,7 @@ impl Program {
     /// Candidates of wide node `n` (children at positions >= `skip`) along `[tmin, tmax]`,
     /// sorted by box entry.
     fn collect(&self, n: usize, skip: u32, ray: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) {
-        let w = &self.wides[self.wide[n] as usize];
+        let w = self.wide_of(n);
         let lo = scratch.cand.len();
         let cand = &mut scratch.cand;
         w.bvh.traverse(ray.o, ray.inv_d, tmin, tmax, |pos, _| {
@@ -766,7 +781,10 @@ impl Program {
         }
         let s = &mut cand[lo..];
         if s.len() > 1 {
-            s.sort_unstable_by(|a, b| a.1.total_cmp(&b.1));
+            // By entry, then by position: a total order, so the candidates are
+            // taken in the same order whichever tree listed them (a tile's
+            // short list or the baked BVH).
+            s.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         }
     }
 

@@ -15,10 +15,17 @@
 
 use rothray_primitives::{frustum::Frustum, polytope::Plane, LeafKind, LeafTable};
 
-use crate::program::{NodeKind, Program};
+use rothray_primitives::bvh::BvhNode;
+
+use crate::program::{NodeKind, Program, Wide};
 
 /// Below this depth nodes are kept as baked (the specialisation recurses).
 const MAX_DEPTH: u32 = 64;
+
+/// A wide difference whose subtrahends the tile meets at most this many of
+/// gets a list of just those (a one-leaf tree), which its rays sort by entry
+/// exactly as they sort what the baked BVH gives them.
+const SHORT_LIST: usize = 16;
 
 /// What the specialisation of one tile did (summed over its objects).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -67,6 +74,7 @@ impl TileProgram {
         p.bounds.truncate(n);
         p.leafy.truncate(n);
         p.children.truncate(self.base_children);
+        p.local_len = 0;
     }
 
     /// The counts so far, reset.
@@ -153,9 +161,11 @@ impl Spec<'_> {
         None
     }
 
-    /// A wide union or difference: empty when the region meets none of its
-    /// (union) children, the positive operand alone when it meets none of the
-    /// subtrahends, else the node as baked.
+    /// A wide union or difference. A union is empty when the region meets
+    /// none of its children, the child alone when it meets one, else as baked
+    /// (its rays combine children in the BVH's order). A difference is its
+    /// positive operand alone when the region meets no subtrahend, and with a
+    /// short list of the subtrahends met when there are few.
     fn wide(&mut self, n: u32, depth: u32) -> Option<u32> {
         let b = self.base;
         let nu = n as usize;
@@ -163,25 +173,106 @@ impl Spec<'_> {
         self.tp.counts.wide_queries += 1;
         let kind = b.kind[nu];
         let skip = (kind == NodeKind::Difference) as u32;
-        let mut met = w.unbounded.iter().any(|&p| p >= skip);
-        if !met {
-            let region = self.region;
-            let children = &b.children[b.first[nu] as usize..];
-            let bounds = &b.bounds;
-            let found = std::cell::Cell::new(false);
-            w.cull.cull(
-                |bx| !found.get() && region.touches_box(bx),
-                |pos| found.set(found.get() || region.touches_box(&bounds[children[pos as usize] as usize])),
-            );
-            met = found.get();
+        let first = b.first[nu] as usize;
+        // The positions met, up to one past the short list.
+        let at = self.tp.kids.len();
+        let mut many = false;
+        for &p in &w.unbounded {
+            if p >= skip {
+                self.tp.kids.push(p);
+            }
         }
+        {
+            let region = self.region;
+            let children = &b.children[first..];
+            let bounds = &b.bounds;
+            let kids = std::cell::RefCell::new(&mut self.tp.kids);
+            let limit = at + SHORT_LIST + 1;
+            w.cull.cull(
+                |bx| kids.borrow().len() < limit && region.touches_box(bx),
+                |pos| {
+                    let mut k = kids.borrow_mut();
+                    if k.len() < limit && region.touches_box(&bounds[children[pos as usize] as usize]) {
+                        k.push(pos);
+                    }
+                },
+            );
+            many = many || kids.borrow().len() > at + SHORT_LIST;
+        }
+        let met = self.tp.kids.len() - at;
         match kind {
             NodeKind::Difference => {
-                let pos = self.node(b.children[b.first[nu] as usize], depth + 1)?;
-                if met { Some(n) } else { Some(pos) }
+                let Some(pos) = self.node(b.children[first], depth + 1) else { return self.drop_kids(at) };
+                if met == 0 {
+                    return self.drop_kids(at).or(Some(pos));
+                }
+                if many {
+                    self.tp.kids.truncate(at);
+                    return Some(n);
+                }
+                Some(self.write_short_difference(n, pos, at))
             }
-            _ => met.then_some(n),
+            _ => {
+                if met == 1 && !many {
+                    let c = b.children[first + self.tp.kids[at] as usize];
+                    self.tp.kids.truncate(at);
+                    return self.node(c, depth + 1);
+                }
+                self.tp.kids.truncate(at);
+                (met > 0).then_some(n)
+            }
         }
+    }
+
+    /// A difference of `positive` minus the subtrahends of baked node `like`
+    /// at the positions `kids[at..]`, with a one-leaf tree listing them in
+    /// position order (its rays collect and sort them by entry, then position,
+    /// as they do from the baked tree).
+    fn write_short_difference(&mut self, like: u32, positive: u32, at: usize) -> u32 {
+        let b = self.base;
+        let first = b.first[like as usize] as usize;
+        let tp = &mut *self.tp;
+        tp.kids[at..].sort_unstable();
+        let p = &mut tp.prog;
+        let cfirst = p.children.len() as u32;
+        p.children.push(positive);
+        if p.local_len == p.local_wides.len() {
+            p.local_wides.push(Wide::default());
+        }
+        let w = &mut p.local_wides[p.local_len];
+        w.unbounded.clear();
+        w.bvh.prims.clear();
+        w.bvh.nodes.clear();
+        w.bvh.cw = None;
+        // As baked: bounded subtrahends in the tree, unbounded ones beside it.
+        let mut bounds = rothray_primitives::Aabb::EMPTY;
+        for (k, &pos) in tp.kids[at..].iter().enumerate() {
+            let c = b.children[first + pos as usize];
+            p.children.push(c);
+            let cb = b.bounds[c as usize];
+            if cb.is_finite() {
+                bounds = bounds.union(&cb);
+                w.bvh.prims.push(k as u32 + 1);
+            } else {
+                w.unbounded.push(k as u32 + 1);
+            }
+        }
+        let count = tp.kids.len() - at;
+        if !w.bvh.prims.is_empty() {
+            w.bvh.nodes.push(BvhNode { min: bounds.min, first: 0, max: bounds.max, count: w.bvh.prims.len() as u32 });
+        }
+        let wide = (p.wides.len() + p.local_len) as u32;
+        p.local_len += 1;
+        tp.kids.truncate(at);
+        let id = p.kind.len() as u32;
+        p.kind.push(NodeKind::Difference);
+        p.first.push(cfirst);
+        p.count.push(count as u32 + 1);
+        p.wide.push(wide);
+        p.bounds.push(p.bounds[positive as usize]);
+        p.leafy.push(false);
+        tp.counts.nodes_written += 1;
+        id
     }
 
     /// Writes a node of `kind` over `kids[at..]` (the operands kept, in order).
