@@ -332,12 +332,32 @@ fn run(cli: Cli) -> Result<()> {
                     "trace_s_median": med,
                     "trace_s_all": times,
                     "mrays_per_s": rays as f64 / med / 1e6,
+                    "counters": bench_counters(&stats, rays),
                 });
                 println!("{j}");
             }
             Ok(())
         }
     }
+}
+
+/// What one frame skipped and did (the last timed render): tiles, the tile
+/// programs, and the evaluation per ray.
+fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::Value {
+    let t = &st.tiles;
+    let per = |x: u64, n: u64| if n == 0 { 0.0 } else { x as f64 / n as f64 };
+    serde_json::json!({
+        "tiles": t.tiles,
+        "tiles_culled": t.tiles_culled,
+        "objects_per_tile": per(t.objects_kept, t.tiles),
+        "leaves_pruned_per_tile": per(t.spec.leaves_pruned, t.tiles),
+        "leaves_kept_per_tile": per(t.spec.leaves_kept, t.tiles),
+        "wide_queries_per_tile": per(t.spec.wide_queries, t.tiles),
+        "tile_nodes_written": t.spec.nodes_written,
+        "leaves_asked_per_ray": per(st.eval.leaves, rays),
+        "wide_children_visited": st.eval.wide_children,
+        "early_outs": st.eval.early_outs,
+    })
 }
 
 fn csv(s: &str) -> String {

@@ -12,6 +12,7 @@ use rothray_primitives::{
     Aabb, LeafKind, LeafTable, Span, SpanSink, Surf,
 };
 
+use crate::counts;
 use crate::spans::{combine_into, Op, SpanList};
 
 /// Nodes with more children than this get a BVH over their children.
@@ -251,6 +252,7 @@ impl<'a> MemoLanes<'a> {
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn leaf_spans<S: SpanSink + ?Sized>(leaves: &LeafTable, ray: &RayCtx, i: u32, lo: f32, hi: f32, nearest: Option<f32>, out: &mut S) -> f32 {
+    counts::leaf();
     if let (Some((memo, k)), Some(_)) = (ray.memo, nearest) {
         if let Some(v) = memo.serve(k, i, lo, hi, out) {
             return v;
@@ -697,6 +699,7 @@ impl Program {
                 _ => {
                     let s = acc.as_slice();
                     if s.is_empty() {
+                        counts::early_out();
                         return valid;
                     }
                     lo = lo.max(s[0].t0);
@@ -728,6 +731,7 @@ impl Program {
         let mut hi = tmax;
         let mut valid = f32::INFINITY;
         let mut visit = |pos: u32, acc: &mut SpanList, hi: &mut f32, valid: &mut f32| {
+            counts::wide_child();
             let c = self.children[(first + pos) as usize];
             leaf.clear();
             let v = leaf_spans(leaves, ray, self.first[c as usize], tmin, *hi, ray.nearest(mode), leaf);
@@ -771,6 +775,7 @@ impl Program {
             let c = self.children[(self.first[n] + pos) as usize];
             if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.o, ray.inv_d, tmin, tmax) {
                 cand.push((pos, t0));
+                counts::wide_child();
             }
             tmax
         });
@@ -837,11 +842,13 @@ impl Program {
                     NodeKind::Intersection => {
                         scratch.accs[top].clear();
                         scratch.frames[top].done = true;
+                        counts::early_out();
                         return None;
                     }
                     _ => {
                         if f.next == 1 {
                             f.done = true;
+                            counts::early_out();
                             return None;
                         }
                         continue;
@@ -882,6 +889,7 @@ impl Program {
             NodeKind::Intersection | NodeKind::Difference => {
                 if acc.is_empty() {
                     f.done = true;
+                    counts::early_out();
                 } else {
                     // Later operands only matter over the current extent.
                     let s = acc.as_slice();

@@ -4,7 +4,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
-use rothray_csg::Scratch;
+use rothray_csg::{take_eval_counts, EvalCounts, Scratch};
 
 use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
 use crate::tile::{TileScratch, TileStats};
@@ -167,6 +167,8 @@ pub struct RenderStats {
     pub shadow_rays: u64,
     /// What the tile level skipped.
     pub tiles: TileStats,
+    /// What the CSG evaluation did (camera and shadow rays).
+    pub eval: EvalCounts,
 }
 
 #[inline]
@@ -272,7 +274,8 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     let done = AtomicUsize::new(0);
     let (tile_w, rows) = tile_size();
     let shadow_total = AtomicUsize::new(0);
-    let tile_total = std::sync::Mutex::new(TileStats::default());
+    let tile_total = std::sync::Mutex::new((TileStats::default(), EvalCounts::default()));
+    let _ = take_eval_counts(); // this thread's earlier queries are not the render's
     let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
     let encode = |c: Vec3| -> [u8; 3] {
         match s.aov {
@@ -397,7 +400,9 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                 }
             }
             shadow_total.fetch_add(shadows as usize, Ordering::Relaxed);
-            tile_total.lock().expect("tile counts").add(&ts.take_counts());
+            let mut tot = tile_total.lock().expect("tile counts");
+            tot.0.add(&ts.take_counts());
+            tot.1.add(&take_eval_counts());
             let d = done.fetch_add(rows_here, Ordering::Relaxed) + rows_here;
             progress(d, h);
         },
@@ -417,10 +422,12 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
             out[i * 3..i * 3 + 3].copy_from_slice(&[g, g, g]);
         }
     }
+    let (tiles, eval) = tile_total.into_inner().expect("tile counts");
     let stats = RenderStats {
         primary_rays: (w * h) as u64 * spp as u64,
         shadow_rays: shadow_total.into_inner() as u64,
-        tiles: tile_total.into_inner().expect("tile counts"),
+        tiles,
+        eval,
     };
     (out, stats)
 }
