@@ -229,7 +229,10 @@ fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, s
 
 /// Tile size in pixels (width, height): the rays of a tile share one
 /// specialised program (see `crate::tile`). `ROTHRAY_TILE=WxH` overrides it
-/// for measurements.
+/// for measurements. Chosen by callgrind at 480x270, one thread (forest,
+/// logo, a 12-tooth gear, 300 capsules, in 1e6 instructions): 8x8 1542, 205,
+/// 193, 441; 16x4 1535, 207, 198, 440; 16x8 1514, 205, 197, 442; 32x16 1502,
+/// 209, 215, 472; 64x32 1508, 213, 236, 512.
 const TILE: (usize, usize) = (16, 8);
 
 fn tile_size() -> (usize, usize) {
