@@ -375,7 +375,7 @@ impl<'a> ProgramBuilder<'a> {
             for x in bvh.prims.iter_mut() {
                 *x = ids[*x as usize];
             }
-            let mut cull = FlatBvh::build_binary(&boxes, 4);
+            let mut cull = FlatBvh::build_cull(&boxes, 4);
             for x in cull.prims.iter_mut() {
                 *x = ids[*x as usize];
             }

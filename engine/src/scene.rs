@@ -633,7 +633,7 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     for p in bvh.prims.iter_mut() {
         *p = ids[*p as usize];
     }
-    let mut cull = FlatBvh::build_binary(&boxes, 2);
+    let mut cull = FlatBvh::build_cull(&boxes, 2);
     for p in cull.prims.iter_mut() {
         *p = ids[*p as usize];
     }

@@ -106,6 +106,29 @@ impl FlatBvh {
         FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None, boxes: Vec::new() }
     }
 
+    /// [`FlatBvh::build_binary`] with obvhs' fastest preset: for region
+    /// queries (tiles), where a looser tree costs little and the bake of
+    /// `scenes/forest` (10 000 boxes) took 50 ms more with the medium preset.
+    pub fn build_cull(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
+        if boxes.len() <= max_leaf as usize {
+            return FlatBvh::build(boxes, max_leaf);
+        }
+        let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
+        let mut params = BvhBuildParams::fastest_build();
+        params.max_prims_per_leaf = max_leaf.max(1);
+        let mut t = std::time::Duration::ZERO;
+        let b2 = build_bvh2(&oboxes, params, &mut t);
+        let nodes = b2
+            .nodes
+            .iter()
+            .map(|n| {
+                let a = n.aabb();
+                BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
+            })
+            .collect();
+        FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None, boxes: Vec::new() }
+    }
+
     /// Root box (empty for an empty BVH).
     pub fn bounds(&self) -> Aabb {
         self.nodes.first().map(|n| Aabb::new(n.min, n.max)).unwrap_or(Aabb::EMPTY)
