@@ -8,8 +8,10 @@
 #   lit:  rothray `bench` (shadow rays on) against POV-Ray `+Q4 -A` with the
 #         scene's lights as parallel light_sources that cast shadows
 #         (tools/pov_compare.py --time-only --lit).
-# rothray: the median of REPEATS (default 15) renders after a warm-up, about
-# as long as one POV-Ray trace. POV-Ray: its reported Trace Time, +WT2.
+# rothray: the median of n renders after a warm-up, n = RB_SECONDS (default
+# 4) over the time of one probe render, within [3, REPEATS] (REPEATS default
+# 15; the first renders after a pause run slow on this shared machine, so
+# fast scenes get many). POV-Ray: its reported Trace Time, +WT2.
 # ROUNDS (default 3) rounds per scene alternate rothray and POV-Ray (which of
 # the two goes first alternates too); the table gives per scene and mode the
 # median times over the rounds, the median of the per-round speed-ups
@@ -25,6 +27,7 @@ W=${1:-1920}; H=${2:-1080}
 if [ $# -ge 2 ]; then shift 2; elif [ $# -eq 1 ]; then shift 1; fi
 ROUNDS=${ROUNDS:-3}
 REPEATS=${REPEATS:-15}
+RB_SECONDS=${RB_SECONDS:-4}
 MODES=${MODES:-flat lit}
 command -v povray >/dev/null || { echo "povray missing: apt-get install povray" >&2; exit 1; }
 if [ -n "${RB_BIN:-}" ]; then
@@ -46,10 +49,10 @@ for f in "${SCENES[@]}"; do [ -f "$f" ] || { echo "no such scene: $f" >&2; exit 
 RES=$(mktemp)
 trap 'rm -f "$RES"' EXIT
 med() { python3 -c "import json,sys; print(json.loads(sys.stdin.read().strip().splitlines()[-1])['trace_s_median'])"; }
-rb() {  # rb SCENE MODE -> seconds
+rb() {  # rb SCENE MODE [REPEATS] -> seconds
   local extra=()
   [ "$2" = flat ] && extra=(--no-shadows)
-  "$BIN" bench "$1" --width "$W" --height "$H" "${extra[@]}" --repeats "$REPEATS" --json | med
+  "$BIN" bench "$1" --width "$W" --height "$H" "${extra[@]}" --repeats "${3:-$REPEATS}" --json | med
 }
 pv() {  # pv SCENE MODE -> "seconds leaves"
   local extra=() out
@@ -58,31 +61,33 @@ pv() {  # pv SCENE MODE -> "seconds leaves"
   echo "$(echo "$out" | tail -1) $(echo "$out" | sed -n 's/.* leaves=\([0-9]*\) .*/\1/p' | tail -1)"
 }
 
-echo "| scene | leaves | mode | rothray (s) | POV-Ray (s) | speed-up | per-round speed-ups |"
-echo "|---|---|---|---|---|---|---|"
+echo "| scene | leaves | mode | rothray renders | rothray (s) | POV-Ray (s) | speed-up | per-round speed-ups |"
+echo "|---|---|---|---|---|---|---|---|"
 for f in "${SCENES[@]}"; do
   s=$(basename "$f" .json)
   for mode in $MODES; do
     rs=(); ps=(); leaves=?
+    probe=$(rb "$f" "$mode" 1)
+    n=$(python3 -c "import math,sys; print(max(3, min($REPEATS, math.ceil($RB_SECONDS / max($probe, 1e-6)))))")
     for r in $(seq "$ROUNDS"); do
       echo "$s $mode round $r/$ROUNDS" >&2
       if [ $((r % 2)) -eq 1 ]; then
-        t=$(rb "$f" "$mode"); p=$(pv "$f" "$mode") || p="nan ?"
+        t=$(rb "$f" "$mode" "$n"); p=$(pv "$f" "$mode") || p="nan ?"
       else
-        p=$(pv "$f" "$mode") || p="nan ?"; t=$(rb "$f" "$mode")
+        p=$(pv "$f" "$mode") || p="nan ?"; t=$(rb "$f" "$mode" "$n")
       fi
       rs+=("$t"); ps+=("${p%% *}"); leaves=${p##* }
     done
-    python3 - "$s" "$leaves" "$mode" "${rs[*]}" "${ps[*]}" "$RES" <<'PY'
+    python3 - "$s" "$leaves" "$mode" "${rs[*]}" "${ps[*]}" "$RES" "$n" <<'PY'
 import math, statistics, sys
-s, leaves, mode, rs, ps, res = sys.argv[1:]
+s, leaves, mode, rs, ps, res, n = sys.argv[1:]
 rs = [float(x) for x in rs.split()]
 ps = [float(x) for x in ps.split()]
 m = statistics.median
 r = [p / t for p, t in zip(ps, rs)]
 sp = m(r)
-print('| %s | %s | %s | %.4f | %.3f | %.2fx | %s |' % (
-    s, leaves, mode, m(rs), m(ps), sp, ' '.join('%.2f' % x for x in r)),
+print('| %s | %s | %s | %s | %.4f | %.3f | %.2fx | %s |' % (
+    s, leaves, mode, n, m(rs), m(ps), sp, ' '.join('%.2f' % x for x in r)),
     flush=True)
 with open(res, 'a') as f:
     f.write('%s %s %r\n' % (mode, s, sp))

@@ -194,17 +194,19 @@ def polytopes():
 
 
 def nesting():
-    """40 concentric spherical shells, nested 80 nodes deep: level k is
-    (shell_k union level k+1) minus a box wedge turned 3.5 degrees further
-    than the one above it, so the cut-away wedge winds down like a stair."""
-    n = 40
+    """32 concentric spherical shells, nested 64 nodes deep: level k is
+    (shell_k union level k+1) minus a box wedge turned 4 degrees further
+    than the one above it, so the cut-away wedge winds down like a stair.
+    (40 levels took 9.5 s a frame in rothray and 80 s in POV-Ray at
+    1920x1080 on this machine: every ray that enters sees every shell.)"""
+    n = 32
     core = sphere([0, 0, 0], 0.2, color=[1, 0.9, 0.3])
     node = core
     for k in reversed(range(n)):
-        r = 2.0 - k * 0.045
-        shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - 0.025))
-        wedge = X(box([0, -0.5 + 0.012 * k, 0], [3, 3, 3]),
-                  rotate=[0, -3.5 * k, 0], color=[0.3, 0.6, 0.9])
+        r = 2.0 - k * 0.056
+        shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - 0.03))
+        wedge = X(box([0, -0.5 + 0.015 * k, 0], [3, 3, 3]),
+                  rotate=[0, -4 * k, 0], color=[0.3, 0.6, 0.9])
         node = D(U(shell, node), wedge, color=hsv(k / n, 0.5, 0.95))
     return scene("nesting", [3.6, 2.8, 4.4], [0, -0.1, 0], 42,
                  [obj("onion", node, [0.8, 0.8, 0.8])])
