@@ -9,6 +9,9 @@ POV-Ray on a scene.
           [--keep DIR]           (just render POV's id image, keep it)
   python3 tools/pov_compare.py SCENE.json --time-only [--width 1920 --height 1080]
           [--threads 2]          (POV benchmark: +Q0 -A +WT2, normal render)
+          [--lit]                (lit benchmark: the scene's lights as
+                                  parallel light_sources casting shadows,
+                                  +Q4 -A +WT<threads>)
 
 Id comparison: both images are mapped pixel by pixel to a leaf index (or
 background) by nearest palette colour (palette = rothray's id colours, see
@@ -173,6 +176,7 @@ def run_povray(pov_path, png_path, W, H, opts, threads):
 
 ID_OPTS = ["-A", "+Q9", "File_Gamma=1.0", "Display_Gamma=1.0"]
 BENCH_OPTS = ["+Q0", "-A"]
+LIT_OPTS = ["+Q4", "-A"]
 
 
 def parse_seconds(stderr, label):
@@ -353,6 +357,8 @@ def main(argv):
                     help="only render POV's id image (use with --keep)")
     ap.add_argument("--time-only", action="store_true",
                     help="time POV-Ray: normal render, +Q0 -A +WT<threads>")
+    ap.add_argument("--lit", action="store_true",
+                    help="with --time-only: lights cast shadows, +Q4 -A")
     a = ap.parse_args(argv)
     if (a.width is None) != (a.height is None):
         ap.error("give both --width and --height")
@@ -365,8 +371,11 @@ def main(argv):
             pov = os.path.join(d, base + ".pov")
             png = os.path.join(d, base + "_pov.png")
             W, H, leaves = scene2pov.convert_file(a.scene, pov, False,
-                                                  a.width, a.height, a.sturm)
-            cmd, err = run_povray(pov, png, W, H, BENCH_OPTS, a.threads)
+                                                  a.width, a.height, a.sturm,
+                                                  lit=a.lit)
+            cmd, err = run_povray(pov, png, W, H,
+                                  LIT_OPTS if a.lit else BENCH_OPTS,
+                                  a.threads)
             t = parse_seconds(err, "Trace")
             p = parse_seconds(err, "Parse")
             b = parse_seconds(err, "Bounding")
@@ -377,8 +386,9 @@ def main(argv):
             m = re.search(r"Trace Time:[^\n]*\n\s*using (\d+) thread\(s\) "
                           r"with ([0-9.]+) CPU-seconds", err)
             cpu = "threads=%s cpu_s=%s " % m.groups() if m else ""
-            print("pov_time %s %dx%d leaves=%d parse_s=%s bounding_s=%s "
-                  "%strace_s=%.3f  (%s)" % (os.path.basename(a.scene), W, H,
+            print("pov_time %s%s %dx%d leaves=%d parse_s=%s bounding_s=%s "
+                  "%strace_s=%.3f  (%s)" % (os.path.basename(a.scene),
+                                           " lit" if a.lit else "", W, H,
                                            len(leaves), p, b, cpu, t,
                                            povray_version()))
             print(t)

@@ -1,0 +1,533 @@
+#!/usr/bin/env python3
+"""Generates the benchmark scenes of benches/scenes/ that are not copies of
+the examples in scenes/ (logo, cheese, forest, sampler, sweep, bunny).
+
+    python3 benches/scenes/gen.py            # rewrites every generated scene
+    python3 benches/scenes/gen.py gear tori  # only these
+
+Deterministic (one seeded random.Random per scene), standard library only.
+Every scene has a 1920x1080 camera that frames it and one directional light,
+so `benches/compare_povray.sh` can run it flat and lit. Files the scenes read
+(bunny.obj, knob.obj) lie in this folder: a scene may only read files inside
+its own folder. knob.obj is written here too.
+"""
+import json
+import math
+import os
+import random
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+LIGHT = [{"direction": [-1, -2, -1.5], "color": [1, 1, 1]}]
+
+
+# ------------------------------------------------------------------ helpers
+def r6(x):
+    return round(x, 6)
+
+
+def v3(v):
+    return [r6(c) for c in v]
+
+
+def sphere(c, r, **kw):
+    return dict(sphere={"center": v3(c), "radius": r6(r)}, **kw)
+
+
+def box(lo, hi, **kw):
+    return dict(box={"min": v3(lo), "max": v3(hi)}, **kw)
+
+
+def cyl(a, b, r, **kw):
+    return dict(cylinder={"a": v3(a), "b": v3(b), "radius": r6(r)}, **kw)
+
+
+def cone(a, b, ra, rb, **kw):
+    return dict(cone={"a": v3(a), "b": v3(b), "radius_a": r6(ra),
+                      "radius_b": r6(rb)}, **kw)
+
+
+def torus(c, axis, major, minor, **kw):
+    return dict(torus={"center": v3(c), "axis": v3(axis), "major": r6(major),
+                       "minor": r6(minor)}, **kw)
+
+
+def plane(n, off, **kw):
+    return dict(plane={"normal": v3(n), "offset": r6(off)}, **kw)
+
+
+def mesh(path, **kw):
+    return dict(mesh={"path": path}, **kw)
+
+
+def sweep(pts, **kw):
+    return dict(swept_sphere={"bezier": [[r6(c) for c in p] for p in pts]},
+                **kw)
+
+
+def U(*c, **kw):
+    return dict(union=list(c), **kw)
+
+
+def I(*c, **kw):
+    return dict(intersection=list(c), **kw)
+
+
+def D(*c, **kw):
+    return dict(difference=list(c), **kw)
+
+
+def X(shape, translate=None, rotate=None, scale=None, **kw):
+    t = {"shape": shape}
+    if translate is not None:
+        t["translate"] = v3(translate)
+    if rotate is not None:
+        t["rotate_deg"] = v3(rotate)
+    if scale is not None:
+        t["scale"] = v3(scale) if isinstance(scale, (list, tuple)) else r6(scale)
+    return dict(transformed=t, **kw)
+
+
+def obj(name, shape, color):
+    return {"name": name, "color": v3(color), "shape": shape}
+
+
+def scene(name, eye, target, fov, objects, lights=LIGHT, background=(0, 0, 0)):
+    return {"name": name,
+            "camera": {"eye": v3(eye), "target": v3(target), "up": [0, 1, 0],
+                       "fov_y_deg": fov},
+            "image": {"width": 1920, "height": 1080},
+            "background": list(background),
+            "lights": lights,
+            "objects": objects}
+
+
+def leaves(node):
+    k = [k for k in node if k not in ("name", "color")][0]
+    v = node[k]
+    if k in ("union", "intersection", "difference"):
+        return sum(leaves(c) for c in v)
+    if k == "transformed":
+        return leaves(v["shape"])
+    return 1
+
+
+def depth(node):
+    k = [k for k in node if k not in ("name", "color")][0]
+    v = node[k]
+    if k in ("union", "intersection", "difference"):
+        return 1 + max(depth(c) for c in v)
+    if k == "transformed":
+        return 1 + depth(v["shape"])
+    return 0
+
+
+def norm(a):
+    l = math.sqrt(sum(x * x for x in a))
+    return [x / l for x in a]
+
+
+def rot(v, ax, ay, az):
+    """M = Rz * Ry * Rx (degrees), as the scene format's rotate_deg."""
+    x, y, z = v
+    a = math.radians(ax)
+    y, z = y * math.cos(a) - z * math.sin(a), y * math.sin(a) + z * math.cos(a)
+    a = math.radians(ay)
+    x, z = x * math.cos(a) + z * math.sin(a), -x * math.sin(a) + z * math.cos(a)
+    a = math.radians(az)
+    x, y = x * math.cos(a) - y * math.sin(a), x * math.sin(a) + y * math.cos(a)
+    return [x, y, z]
+
+
+def hsv(h, s=0.6, v=0.9):
+    i = int(h * 6) % 6
+    f = h * 6 - int(h * 6)
+    p, q, t = v * (1 - s), v * (1 - s * f), v * (1 - s * (1 - f))
+    return [(v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v),
+            (v, p, q)][i]
+
+
+# ------------------------------------------------------------------ scenes
+def polytopes():
+    """Eight convex polytopes, each an intersection of 6 to 12 half-spaces
+    (cube, octahedron, dodecahedron, prisms, chamfered and random-cut
+    cubes), three of them minus a torus."""
+    rng = random.Random(11)
+    phi = (1 + 5 ** 0.5) / 2
+    cube = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1],
+            [0, 0, -1]]
+    octa = [[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)]
+    dode = []
+    for s1 in (1, -1):
+        for s2 in (1, -1):
+            dode += [[0, s1, s2 * phi], [s1, s2 * phi, 0], [s2 * phi, 0, s1]]
+    hexp = [[math.cos(math.radians(60 * i)), 0, math.sin(math.radians(60 * i))]
+            for i in range(6)] + [[0, 1, 0], [0, -1, 0]]
+    octp = [[math.cos(math.radians(45 * i + 22.5)), 0,
+             math.sin(math.radians(45 * i + 22.5))] for i in range(8)] + \
+        [[0, 1, 0], [0, -1, 0]]
+    chamf = cube + [[sx, 1, sz] for sx in (1, -1) for sz in (1, -1)]
+    rcut = cube + [[rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)]
+                   for _ in range(6)]
+    tri = [[math.cos(math.radians(120 * i)), 0, math.sin(math.radians(120 * i))]
+           for i in range(3)] + [[0, 1, 0], [0, -1, 0], [0.3, 1, 0.2]]
+    kinds = [("cube", cube, 0.85, True), ("octahedron", octa, 0.95, False),
+             ("dodecahedron", dode, 0.85, True), ("hexprism", hexp, 0.8, False),
+             ("octprism", octp, 0.8, True), ("chamfered", chamf, 0.8, False),
+             ("randomcut", rcut, 0.8, False), ("triprism", tri, 0.55, False)]
+    objs = []
+    for i, (nm, normals, r, cut) in enumerate(kinds):
+        c = [-3.3 + 2.2 * (i % 4), 1.15 if i < 4 else -1.15, 0]
+        ang = [rng.uniform(-40, 40), rng.uniform(-60, 60), rng.uniform(-30, 30)]
+        hs = []
+        for n in normals:
+            n = norm(rot(norm(n), *ang))
+            rr = r if nm != "randomcut" or len(hs) < 6 else r * 0.8
+            hs.append(plane(n, sum(a * b for a, b in zip(n, c)) + rr))
+        shape = I(*hs)
+        if cut:
+            ax = norm([rng.uniform(-1, 1), 1, rng.uniform(-1, 1)])
+            shape = D(shape, torus(c, ax, 0.9 * r, 0.3 * r,
+                                   color=[0.95, 0.85, 0.3]))
+        objs.append(obj(nm, shape, hsv(i / 8)))
+    return scene("polytopes", [0, 1.2, 9], [0, 0, 0], 40, objs)
+
+
+def nesting():
+    """32 concentric spherical shells, nested 64 nodes deep: level k is
+    (shell_k union level k+1) minus a box wedge turned 4 degrees further
+    than the one above it, so the cut-away wedge winds down like a stair.
+    (40 levels took 9.5 s a frame in rothray and 80 s in POV-Ray at
+    1920x1080 on this machine: every ray that enters sees every shell.)"""
+    n = 32
+    core = sphere([0, 0, 0], 0.2, color=[1, 0.9, 0.3])
+    node = core
+    for k in reversed(range(n)):
+        r = 2.0 - k * 0.056
+        shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - 0.03))
+        wedge = X(box([0, -0.5 + 0.015 * k, 0], [3, 3, 3]),
+                  rotate=[0, -4 * k, 0], color=[0.3, 0.6, 0.9])
+        node = D(U(shell, node), wedge, color=hsv(k / n, 0.5, 0.95))
+    return scene("nesting", [3.6, 2.8, 4.4], [0, -0.1, 0], 42,
+                 [obj("onion", node, [0.8, 0.8, 0.8])])
+
+
+def capsules():
+    """300 separate objects, each a capsule (cylinder and two spheres) under
+    a random rotation and non-uniform scale, filling the view."""
+    rng = random.Random(300)
+    objs = []
+    for i in range(300):
+        h, r = 0.28, 0.12
+        cap = U(cyl([0, -h, 0], [0, h, 0], r), sphere([0, -h, 0], r),
+                sphere([0, h, 0], r))
+        t = X(cap, translate=[rng.uniform(-6, 6), rng.uniform(-3.3, 3.3),
+                              rng.uniform(-3, 1.5)],
+              rotate=[rng.uniform(0, 360), rng.uniform(0, 360),
+                      rng.uniform(0, 360)],
+              scale=[rng.uniform(0.6, 1.6), rng.uniform(0.6, 1.6),
+                     rng.uniform(0.6, 1.6)])
+        objs.append(obj("capsule%d" % i, t, hsv(rng.random(), 0.55, 0.9)))
+    return scene("capsules", [0, 0, 10], [0, 0, -1], 40, objs)
+
+
+def gear_shape(c, R, n, w, phase, rng):
+    disc = U(cyl([0, 0, -w], [0, 0, w], R),
+             cyl([0, 0, -1.8 * w], [0, 0, 1.8 * w], 0.42 * R,
+                 color=[0.75, 0.75, 0.8]))
+    tw = math.pi * R / n * 0.5
+    teeth = [X(box([R - 0.22, -tw, -3 * w], [R + 1, tw, 3 * w]),
+               rotate=[0, 0, phase + 360.0 * i / n]) for i in range(n)]
+    holes = [cyl([0, 0, -3 * w], [0, 0, 3 * w], 0.16 * R)]
+    m = 5 if n >= 16 else 4
+    for j in range(m):
+        a = math.radians(phase + 360.0 * (j + 0.5) / m)
+        holes.append(cyl([0.64 * R * math.cos(a), 0.64 * R * math.sin(a),
+                          -3 * w], [0.64 * R * math.cos(a),
+                                    0.64 * R * math.sin(a), 3 * w],
+                         0.15 * R))
+    g = D(disc, *teeth, *holes, color=[0.9, 0.4, 0.3])
+    return X(g, translate=c, rotate=[rng.uniform(-12, 12),
+                                     rng.uniform(-25, 25), 0])
+
+
+def gear():
+    """Three gears: a disc (with hub) minus 12, 16 and 24 rotated box teeth
+    and lightening holes."""
+    rng = random.Random(12)
+    objs = [obj("gear24", gear_shape([-2.7, 0.3, 0], 1.75, 24, 0.2, 0, rng),
+                [0.8, 0.7, 0.3]),
+            obj("gear16", gear_shape([0.45, -0.55, 0.2], 1.4, 16, 0.22, 7, rng),
+                [0.5, 0.7, 0.9]),
+            obj("gear12", gear_shape([3.35, 0.9, -0.2], 1.2, 12, 0.25, 3, rng),
+                [0.6, 0.85, 0.5])]
+    return scene("gear", [0.8, 2.0, 8.5], [0.2, 0.1, 0], 40, objs)
+
+
+def tori():
+    """A chain of 7 interlocking tori on tilted axes, and below it tori
+    intersected with a box and a sphere, minus a torus and minus spheres."""
+    objs = []
+    for i in range(7):
+        ax = [0, 0.25, 1] if i % 2 == 0 else [0.1, 1, -0.2]
+        objs.append(obj("link%d" % i, torus([-3.45 + 1.15 * i, 1.2, 0], ax,
+                                            0.8, 0.15), hsv(i / 7)))
+    y = -1.1
+    objs.append(obj("half", I(torus([-3.6, y, 0], [0.3, 1, 0.4], 0.9, 0.3),
+                              box([-5, y - 0.2, -2], [-2, y + 2, 2],
+                                  color=[0.9, 0.9, 0.5])), [0.9, 0.4, 0.4]))
+    objs.append(obj("grooved", D(torus([-1.2, y, 0], [0, 0.6, 1], 0.9, 0.32),
+                                 torus([-1.2, y, 0], [1, 0.2, 0], 0.9, 0.18,
+                                       color=[0.3, 0.9, 0.9])),
+                    [0.4, 0.9, 0.4]))
+    beads = [sphere([1.2 + 0.9 * math.cos(a), y + 0.9 * math.sin(a) * 0.8,
+                     0.9 * math.sin(a) * 0.6], 0.28, color=[0.9, 0.5, 0.9])
+             for a in (2 * math.pi * j / 8 for j in range(8))]
+    objs.append(obj("bitten", D(torus([1.2, y, 0], [0, -0.6, 0.8], 0.9, 0.3),
+                                *beads), [0.4, 0.5, 0.95]))
+    objs.append(obj("lens", I(torus([3.6, y, 0], [0.5, 1, 0.3], 0.85, 0.4),
+                              sphere([3.6, y + 0.3, 0.3], 1.0,
+                                     color=[0.95, 0.7, 0.3])),
+                    [0.95, 0.95, 0.95]))
+    return scene("tori", [0, 1.0, 9], [0, 0, 0], 40, objs)
+
+
+def fill():
+    """Most pixels hit: the camera is close to a large slab (minus 160
+    sphere dimples and 24 through-holes) in front of a back plate, both
+    larger than the view."""
+    rng = random.Random(160)
+    dimples = []
+    for j in range(10):
+        for i in range(16):
+            dimples.append(sphere([-7.5 + i + rng.uniform(-0.2, 0.2),
+                                   -4.5 + j + rng.uniform(-0.2, 0.2),
+                                   0.5 + rng.uniform(0.05, 0.2)],
+                                  rng.uniform(0.28, 0.42),
+                                  color=[0.9, 0.6, 0.3]))
+    holes = []
+    for j in range(4):
+        for i in range(6):
+            x, y = -5 + 2 * i, -3 + 2 * j
+            holes.append(cyl([x, y, -1], [x, y, 1], 0.22,
+                             color=[0.3, 0.6, 0.9]))
+    slab = D(box([-8, -5, -0.5], [8, 5, 0.5]), *dimples, *holes)
+    back = box([-12, -8, -3.2], [12, 8, -2.8])
+    return scene("fill", [1.5, 1.0, 4.5], [0, 0, 0], 60,
+                 [obj("slab", slab, [0.85, 0.85, 0.8]),
+                  obj("back", back, [0.4, 0.4, 0.5])])
+
+
+def ground():
+    """An infinite ground plane (a half-space) under seven CSG objects that
+    cast shadows on it."""
+    objs = [obj("ground", plane([0, 1, 0], 0), [0.55, 0.6, 0.5])]
+    objs.append(obj("logo", X(D(I(box([-1, -1, -1], [1, 1, 1]),
+                                   sphere([0, 0, 0], 1.35)),
+                                 U(cyl([-2, 0, 0], [2, 0, 0], 0.6),
+                                   cyl([0, -2, 0], [0, 2, 0], 0.6),
+                                   cyl([0, 0, -2], [0, 0, 2], 0.6),
+                                   color=[0.3, 0.5, 0.9])),
+                              translate=[0, 0.75, 0], scale=0.75,
+                              rotate=[0, 30, 0]), [1, 0.5, 0.2]))
+    objs.append(obj("pierced", D(cone([-2.6, 0, 0.5], [-2.6, 1.8, 0.5], 0.9,
+                                      0.15),
+                                 cyl([-4, 0.6, 0.5], [-1, 0.6, 0.5], 0.25)),
+                    [0.3, 0.9, 0.3]))
+    objs.append(obj("ball", D(sphere([2.4, 0.7, 0.8], 0.7),
+                              sphere([2.0, 1.0, 1.3], 0.45)), [0.9, 0.3, 0.3]))
+    objs.append(obj("arch", D(box([-1.2, 0, -2.8], [1.2, 1.6, -2.2]),
+                              cyl([0, 0, -3], [0, 0, -2], 0.7)),
+                    [0.8, 0.8, 0.6]))
+    objs.append(obj("ring", I(torus([3.8, 0.9, -1.5], [1, 0, 0.3], 0.7, 0.2),
+                              plane([0, -1, 0], -0.05)), [0.6, 0.4, 0.9]))
+    objs.append(obj("pillar", U(cyl([-4.5, 0, -2], [-4.5, 2.4, -2], 0.3),
+                                sphere([-4.5, 2.4, -2], 0.45)),
+                    [0.9, 0.9, 0.9]))
+    objs.append(obj("slab", X(D(box([-0.6, 0, -0.4], [0.6, 0.3, 0.4]),
+                                sphere([0, 0.35, 0], 0.3)),
+                              translate=[1.0, 0, 2.3], rotate=[0, 25, 0]),
+                    [0.3, 0.8, 0.8]))
+    lights = [{"direction": [-0.7, -1.6, -0.9], "color": [1, 1, 1]}]
+    return scene("ground", [0.5, 2.6, 8], [0, 0.6, 0], 45, objs, lights,
+                 background=(0.5, 0.65, 0.9))
+
+
+BUNNY = 0.15      # bunny.obj is 10 units wide; this makes it 1.5
+
+
+def mesh_cut():
+    """Meshes cut by analytic solids: the bunny drilled by three cylinders,
+    sliced by a box and a half-space, bitten by spheres; a lumpy mesh minus a
+    box corner."""
+    b = X(mesh("bunny.obj"), scale=BUNNY)
+    hole = [0.3, 0.6, 0.9]
+    drilled = X(D(b, cyl([-1, 0.5, 0], [1, 0.5, 0], 0.16, color=hole),
+                  cyl([0.15, -0.5, -0.3], [0.15, 2, 0.1], 0.12, color=hole),
+                  cyl([-0.2, 0.8, -1], [-0.2, 0.8, 1], 0.14, color=hole)),
+                translate=[-2.1, 0, 0],
+                rotate=[0, 20, 0])
+    sliced = X(I(b, box([-0.55, -0.1, -0.6], [0.6, 1.6, 0.6],
+                        color=[0.9, 0.8, 0.3]),
+                 plane([0.3, 1, 0.2], 0.85, color=[0.4, 0.9, 0.6])),
+               translate=[0, 0, 0], rotate=[0, -25, 0])
+    rng = random.Random(3)
+    bites = [sphere([rng.uniform(-0.6, 0.6), rng.uniform(0.2, 1.3),
+                     rng.uniform(0.1, 0.6)], rng.uniform(0.1, 0.2),
+                    color=[0.9, 0.3, 0.3]) for _ in range(8)]
+    bitten = X(D(b, *bites), translate=[2.1, 0, 0], rotate=[0, -40, 0])
+    knob = D(X(mesh("knob.obj"), translate=[0, 2.05, -1.5], scale=0.65),
+             box([0, 2.05, -1.5], [2, 4, 0.5], color=[0.3, 0.9, 0.5]))
+    return scene("mesh_cut", [0, 1.6, 6.2], [0, 0.9, 0], 40,
+                 [obj("drilled", drilled, [0.85, 0.8, 0.7]),
+                  obj("sliced", sliced, [0.85, 0.8, 0.7]),
+                  obj("bitten", bitten, [0.85, 0.8, 0.7]),
+                  obj("knob", knob, [0.8, 0.5, 0.9])])
+
+
+def mesh_mold():
+    """Analytic solids cut by meshes: a block minus a bunny (a mould), a
+    sphere minus the lumpy mesh, a cylinder intersected with a bunny, and a
+    slab minus a row of small bunnies."""
+    b = mesh("bunny.obj")
+    mold = D(box([-3.4, 0, -0.8], [-1.2, 1.4, 0.6]),
+             X(b, translate=[-2.3, 0.25, 0.35], scale=BUNNY * 0.9,
+               rotate=[0, 15, 0], color=[0.9, 0.8, 0.4]))
+    holed = D(sphere([0, 0.8, 0], 0.85),
+              X(mesh("knob.obj"), translate=[0.35, 1.05, 0.6], scale=0.6,
+                color=[0.3, 0.8, 0.9]))
+    core = I(cyl([2.3, -0.1, 0], [2.3, 1.7, 0], 0.55),
+             X(b, translate=[2.3, 0, 0], scale=BUNNY * 1.1, rotate=[0, -30, 0],
+               color=[0.95, 0.6, 0.3]))
+    small = [X(b, translate=[-2.4 + 1.2 * i, -0.6, 1.4], scale=BUNNY * 0.5,
+               rotate=[0, 40 * i, 0], color=[0.9, 0.4, 0.5])
+             for i in range(5)]
+    slab = D(box([-3.2, -0.8, 0.9], [3.2, -0.2, 1.9]), *small)
+    return scene("mesh_mold", [0, 2.0, 6.5], [0, 0.4, 0], 40,
+                 [obj("mould", mold, [0.7, 0.75, 0.8]),
+                  obj("holed", holed, [0.9, 0.4, 0.4]),
+                  obj("core", core, [0.5, 0.8, 0.5]),
+                  obj("slab", slab, [0.8, 0.8, 0.6])])
+
+
+def bez(p0, p1, p2, p3, r0, r1):
+    """One cubic segment with radius linear from r0 to r1."""
+    pts = [p0, p1, p2, p3]
+    return [list(p) + [r0 + (r1 - r0) * k / 3] for k, p in enumerate(pts)]
+
+
+def sweep_csg():
+    """Swept spheres inside CSG: a block with a winding groove, a sphere
+    intersected with a tube, a tube minus beads, two crossing tubes minus a
+    box, and a sweep intersected with a half-space."""
+    g = bez([-1.2, 0.75, -0.9], [-0.2, 0.75, -1.4], [0.2, 0.75, 1.4],
+            [1.2, 0.75, 0.9], 0.25, 0.25)
+    g += bez([1.2, 0.75, 0.9], [1.6, 0.75, 0.7], [1.6, 0.75, -0.2],
+             [1.3, 0.75, -0.7], 0.25, 0.15)[1:]
+    groove = X(D(box([-1.4, -0.5, -1.2], [1.4, 0.6, 1.2]),
+                 sweep(g, color=[0.3, 0.6, 0.9])),
+               translate=[-2.6, 0.2, -0.5], rotate=[0, 20, 0])
+    t = bez([-1, -1, 0.2], [-0.3, 1.6, 0.5], [0.3, -1.6, -0.5], [1, 1, -0.2],
+            0.35, 0.35)
+    ball = I(sphere([0, 0, 0], 1.0, color=[0.9, 0.8, 0.3]), sweep(t))
+    ball = X(ball, translate=[0.2, 1.4, -0.3])
+    tt = bez([-1.3, 0, 0], [-0.5, 1, 0.6], [0.5, -1, -0.6], [1.3, 0, 0],
+             0.3, 0.22)
+    beads = [sphere([-1.1 + 0.55 * j, 0.35 * math.sin(2 * j), 0.45], 0.22,
+                    color=[0.9, 0.3, 0.5]) for j in range(5)]
+    beaded = X(D(sweep(tt), *beads), translate=[0.3, -1.2, 0.4])
+    a = bez([-1, -0.8, 0], [-0.3, 0.8, 0.6], [0.3, 0.8, -0.6], [1, -0.8, 0],
+            0.22, 0.3)
+    bb = bez([0, -0.8, -1], [0.6, 0.8, -0.3], [-0.6, 0.8, 0.3], [0, -0.8, 1],
+             0.3, 0.22)
+    cross = X(D(U(sweep(a), sweep(bb, color=[0.5, 0.9, 0.5])),
+                box([-2, -2, 0.2], [2, 2, 2], color=[0.95, 0.95, 0.6])),
+              translate=[2.9, 0.6, -0.3], rotate=[0, -35, 0])
+    h = bez([-0.8, -1.4, 0], [1.5, -0.6, 0.4], [-1.5, 0.6, -0.4],
+            [0.8, 1.4, 0], 0.28, 0.4)
+    cut = I(sweep(h), plane([0.4, -0.3, 1], 0.15, color=[0.6, 0.9, 0.95]))
+    cut = X(cut, translate=[3.1, -1.2, 0.6])
+    return scene("sweep_csg", [0, 3.2, 7.6], [0.3, 0.0, 0], 40,
+                 [obj("groove", groove, [0.85, 0.8, 0.7]),
+                  obj("ball", ball, [0.4, 0.8, 0.9]),
+                  obj("beaded", beaded, [0.9, 0.6, 0.3]),
+                  obj("cross", cross, [0.8, 0.5, 0.9]),
+                  obj("cut", cut, [0.9, 0.9, 0.4])])
+
+
+def knob_obj(path):
+    """A closed lumpy ball (subdivided icosahedron, radius modulated by a
+    few seeded bumps), unit size, outward-oriented triangles."""
+    rng = random.Random(5)
+    t = (1 + 5 ** 0.5) / 2
+    vs = [norm(v) for v in [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0],
+                            [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
+                            [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]]
+    fs = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11),
+          (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6), (7, 1, 8),
+          (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9),
+          (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    for _ in range(3):
+        mid = {}
+
+        def m(a, b):
+            k = (min(a, b), max(a, b))
+            if k not in mid:
+                vs.append(norm([(vs[a][i] + vs[b][i]) / 2 for i in range(3)]))
+                mid[k] = len(vs) - 1
+            return mid[k]
+        nf = []
+        for a, b, c in fs:
+            ab, bc, ca = m(a, b), m(b, c), m(c, a)
+            nf += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        fs = nf
+    bumps = [(norm([rng.gauss(0, 1) for _ in range(3)]),
+              rng.uniform(0.1, 0.25)) for _ in range(7)]
+    out = []
+    for v in vs:
+        r = 1.0
+        for d, a in bumps:
+            c = sum(x * y for x, y in zip(v, d))
+            r += a * max(0.0, c) ** 6
+        out.append([x * r for x in v])
+    # orientation: make every face's normal point outward (star-shaped)
+    fixed = []
+    for a, b, c in fs:
+        A, B, C = out[a], out[b], out[c]
+        e1 = [B[i] - A[i] for i in range(3)]
+        e2 = [C[i] - A[i] for i in range(3)]
+        n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+             e1[0] * e2[1] - e1[1] * e2[0]]
+        fixed.append((a, b, c) if sum(n[i] * A[i] for i in range(3)) > 0
+                     else (a, c, b))
+    with open(path, "w") as f:
+        f.write("# knob.obj: generated by benches/scenes/gen.py "
+                "(%d vertices, %d triangles)\n" % (len(out), len(fixed)))
+        for v in out:
+            f.write("v %.6f %.6f %.6f\n" % tuple(v))
+        for a, b, c in fixed:
+            f.write("f %d %d %d\n" % (a + 1, b + 1, c + 1))
+
+
+SCENES = {f.__name__: f for f in (polytopes, nesting, capsules, gear, tori,
+                                  fill, ground, mesh_cut, mesh_mold,
+                                  sweep_csg)}
+
+
+def main(argv):
+    names = argv or list(SCENES)
+    knob_obj(os.path.join(HERE, "knob.obj"))
+    for n in names:
+        sc = SCENES[n]()
+        nl = sum(leaves(o["shape"]) for o in sc["objects"])
+        dp = max(depth(o["shape"]) for o in sc["objects"])
+        path = os.path.join(HERE, n + ".json")
+        with open(path, "w") as f:
+            json.dump(sc, f, indent=1)
+            f.write("\n")
+        print("%-10s %3d objects %5d leaves depth %2d  %s"
+              % (n, len(sc["objects"]), nl, dp, SCENES[n].__doc__.split("\n")[0]))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
