@@ -119,3 +119,47 @@ fn tile_programs_give_every_ray_the_whole_programs_answer() {
     // The tiles must prune for the test to mean anything.
     assert!(culled > 100 && pruned * 8 > kept && hits > rays / 5, "too little pruning or too few hits to test");
 }
+
+#[test]
+fn shadow_tiles_give_every_ray_the_whole_programs_answer() {
+    // Shadow rays: a box of origins swept along one direction (a tile's hits
+    // towards a directional light). Any-hit, with and without the tile.
+    let (mut rays, mut blocked, mut culled) = (0u64, 0u64, 0u64);
+    for seed in 0..16u64 {
+        let seed = 0x5ad0 + seed;
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..25 {
+            let mut trees = vec![random_tree_with(&mut rng, 3, case % 4 == 0)];
+            for _ in 0..rng.gen_range(0..3) {
+                trees.push(if rng.gen_bool(0.5) { wide_tree(&mut rng) } else { random_tree(&mut rng, 2) });
+            }
+            if rng.gen_bool(0.3) {
+                trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.2 });
+            }
+            let scene = bake(&trees);
+            remove_mesh_files(&trees);
+            let mut ts = TileScratch::default();
+            let mut scratch = rothray::csg::Scratch::default();
+            for t in 0..12 {
+                let c = rp(&mut rng, 1.5);
+                let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
+                let dir = rp(&mut rng, 1.0).normalize_or(DVec3::Y);
+                let org = rothray::primitives::Aabb::new((c - h).as_vec3(), (c + h).as_vec3());
+                let region = Frustum::sweep(&org, dir.as_vec3());
+                let any = scene.prepare_tile(&region, &mut ts);
+                culled += (!any) as u64;
+                for k in 0..8 {
+                    let o = c + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h;
+                    let r = to_ray(o, dir);
+                    let whole = scene.occluded(&r);
+                    let tiled = any && scene.occluded_in(&r, &mut scratch, Some(&ts.view()));
+                    assert_eq!(tiled, whole, "seed {seed:#x} case {case} tile {t} ray {k}: {r:?} trees {:?}", trees.iter().map(|t| t.json()).collect::<Vec<_>>());
+                    blocked += whole as u64;
+                    rays += 1;
+                }
+            }
+        }
+    }
+    println!("{rays} shadow rays, {blocked} blocked, {culled} sweeps meeting nothing");
+    assert!(blocked > rays / 5 && culled > 50, "too few blocked rays or culled sweeps to test");
+}

@@ -1114,19 +1114,26 @@ impl RenderScene {
 
     /// Any-hit with caller-provided scratch.
     pub fn occluded_with(&self, ray: &Ray, scratch: &mut Scratch) -> bool {
+        self.occluded_in(ray, scratch, None)
+    }
+
+    /// [`RenderScene::occluded_with`]; with `tile`, the ray (inside the region
+    /// the tile was prepared for) evaluates the tile's programs, with the same
+    /// answer.
+    pub fn occluded_in(&self, ray: &Ray, scratch: &mut Scratch, tile: Option<&TileView>) -> bool {
         if !ray.is_valid() {
             return false;
         }
         let ctx = self.ray_ctx(ray.origin, ray.dir);
         for &oi in &self.unbounded {
-            let obj = self.obj_ref(oi, None).expect("no tile");
+            let Some(obj) = self.obj_ref(oi, tile) else { continue };
             if self.object_first(obj, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
                 return true;
             }
         }
         let mut hit = false;
         self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, ray.tmax, |oi, _| {
-            let obj = self.obj_ref(oi, None).expect("no tile");
+            let Some(obj) = self.obj_ref(oi, tile) else { return ray.tmax };
             if self.object_first(obj, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
                 hit = true;
                 return f32::NEG_INFINITY;

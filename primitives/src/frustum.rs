@@ -1,22 +1,32 @@
-//! The region a bundle of rays sweeps: a pyramid from one apex (a tile of
-//! camera rays) with conservative tests against boxes and half-spaces. Tiles
-//! use it to find the objects, leaves and wide-node children their rays can
-//! meet (see the engine's `tile` module).
+//! The region a bundle of rays sweeps, with conservative tests against boxes
+//! and half-spaces: a pyramid from one apex (a tile of camera rays), or a box
+//! of origins swept along one direction (the shadow rays of a tile's hits
+//! towards a directional light). Tiles use it to find the objects, leaves and
+//! wide-node children their rays can meet (see the engine's `tile` module).
 
 use glam::Vec3;
 
 use crate::{aabb::Aabb, polytope::Plane};
 
-/// Every ray `apex + t d`, `t >= 0`, with `d` in the cone spanned by four edge
-/// directions (given in order around the cone).
+/// A region of rays: see [`Frustum::pyramid`] and [`Frustum::sweep`].
 #[derive(Clone, Copy, Debug)]
-pub struct Frustum {
-    apex: Vec3,
-    edges: [Vec3; 4],
-    /// Inward normals of the side planes through the apex, then of the plane
-    /// through the apex facing the cone (without it a box behind the apex
-    /// passes each side plane with its own corner); zero when not usable.
-    planes: [Vec3; 5],
+pub struct Frustum(Region);
+
+#[derive(Clone, Copy, Debug)]
+enum Region {
+    /// Every ray `apex + t d`, `t >= 0`, with `d` in the cone spanned by four
+    /// edge directions (given in order around the cone).
+    Pyramid {
+        apex: Vec3,
+        edges: [Vec3; 4],
+        /// Inward normals of the side planes through the apex, then of the
+        /// plane through the apex facing the cone (without it a box behind
+        /// the apex passes each side plane with its own corner); zero when not
+        /// usable.
+        planes: [Vec3; 5],
+    },
+    /// Every ray `p + t dir`, `t >= 0`, from a point `p` of the box `[lo, hi]`.
+    Sweep { lo: Vec3, hi: Vec3, dir: Vec3 },
 }
 
 impl Frustum {
@@ -34,42 +44,59 @@ impl Frustum {
         if edges.iter().all(|e| e.dot(f) > 0.0) {
             planes[4] = f;
         }
-        Frustum { apex, edges, planes }
+        Frustum(Region::Pyramid { apex, edges, planes })
     }
 
-    /// The apex.
-    pub fn apex(&self) -> Vec3 {
-        self.apex
+    /// The rays from every point of the box `origins` along `dir` (the shadow
+    /// rays of a bundle of hits towards a directional light).
+    pub fn sweep(origins: &Aabb, dir: Vec3) -> Frustum {
+        Frustum(Region::Sweep { lo: origins.min, hi: origins.max, dir })
     }
 
-    /// Can a ray of the pyramid touch the box? Conservative: a p-vertex test per
-    /// plane with a small relative slack; infinite sides are fine.
+    /// Can a ray of the region touch the box? Conservative, with a small
+    /// relative slack; infinite sides are fine.
     #[inline]
     pub fn touches_box(&self, b: &Aabb) -> bool {
         if b.is_empty() {
             return false;
         }
-        for n in self.planes {
-            // The box corner farthest along n.
-            let p = Vec3::select(n.cmpge(Vec3::ZERO), b.max, b.min) - self.apex;
-            // 0 * inf is NaN on an infinite side: the comparison is false and
-            // the plane does not cull, as it must not.
-            let v = n.dot(p);
-            if v < -1e-6 * (1.0 + p.abs().max_element()) {
-                return false;
+        match &self.0 {
+            Region::Pyramid { apex, planes, .. } => {
+                for &n in planes {
+                    // The box corner farthest along n.
+                    let p = Vec3::select(n.cmpge(Vec3::ZERO), b.max, b.min) - *apex;
+                    // 0 * inf is NaN on an infinite side: the comparison is
+                    // false and the plane does not cull, as it must not.
+                    let v = n.dot(p);
+                    if v < -1e-6 * (1.0 + p.abs().max_element()) {
+                        return false;
+                    }
+                }
+                true
+            }
+            Region::Sweep { lo, hi, dir } => {
+                // The box grown by the origins' half extent, against the ray
+                // from their centre (Minkowski sum), grown a little more.
+                let (c, h) = ((*lo + *hi) * 0.5, (*hi - *lo) * 0.5);
+                let slack = 1e-6 * (1.0 + c.abs().max_element() + h.max_element()) + h * 1e-6;
+                let g = Aabb::new(b.min - h - slack, b.max + h + slack);
+                g.ray_range(c, dir.recip(), 0.0, f32::INFINITY).is_some()
             }
         }
-        true
     }
 
-    /// Can a ray of the pyramid reach the half-space `dot(n, p) <= d`? Exact up
-    /// to a small slack: yes when the apex is inside, or some edge heads
-    /// towards the plane (then rays go arbitrarily deep into it).
+    /// Can a ray of the region reach the half-space `dot(n, p) <= d`? Exact up
+    /// to a small slack: yes when a ray starts inside, or heads towards the
+    /// plane (then it goes arbitrarily deep into it).
     #[inline]
     pub fn touches_plane(&self, p: &Plane) -> bool {
         let n = p.n.as_vec3();
-        let a = n.dot(self.apex) as f64;
-        a <= p.d + 1e-6 * (1.0 + p.d.abs() + self.apex.abs().max_element() as f64) || self.edges.iter().any(|e| n.dot(*e) < 0.0)
+        let near = |q: Vec3| (n.dot(q) as f64) <= p.d + 1e-6 * (1.0 + p.d.abs() + q.abs().max_element() as f64);
+        match &self.0 {
+            Region::Pyramid { apex, edges, .. } => near(*apex) || edges.iter().any(|e| n.dot(*e) < 0.0),
+            // The box corner lowest along n.
+            Region::Sweep { lo, hi, dir } => near(Vec3::select(n.cmpge(Vec3::ZERO), *lo, *hi)) || n.dot(*dir) < 0.0,
+        }
     }
 }
 
@@ -104,6 +131,38 @@ mod tests {
                 let (s, t) = (rng.gen_range(0.0..1.0f32), rng.gen_range(0.0..1.0f32));
                 let d = (edges[0] * (1.0 - s) + edges[1] * s) * (1.0 - t) + (edges[3] * (1.0 - s) + edges[2] * s) * t;
                 let p = apex + d * rng.gen_range(0.0..20.0);
+                assert!(tb || !bx.contains(p), "box {bx:?} culled but holds {p}");
+                assert!(tp || pl.n.dot(p.as_dvec3()) > pl.d, "plane {pl:?} culled but holds {p}");
+            }
+        }
+        println!("{culled} of 4000 regions culled");
+        assert!(culled > 1000, "the tests cull too little to mean anything: {culled}");
+    }
+
+    /// The same for sweeps: no point `p + t dir` (p in the origin box) lies in
+    /// a box or half-space that the sweep is said to miss.
+    #[test]
+    fn culled_regions_hold_no_point_of_the_sweep() {
+        let seed = 12u64;
+        println!("seed {seed}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let v = |r: &mut SmallRng, s: f32| Vec3::new(r.gen_range(-s..s), r.gen_range(-s..s), r.gen_range(-s..s));
+        let mut culled = 0;
+        for _ in 0..2000 {
+            let c = v(&mut rng, 3.0);
+            let h = Vec3::new(rng.gen_range(0.0..0.5), rng.gen_range(0.0..0.5), rng.gen_range(0.0..0.5));
+            let org = Aabb::new(c - h, c + h);
+            let dir = v(&mut rng, 1.0).normalize_or(Vec3::Y);
+            let f = Frustum::sweep(&org, dir);
+            let ctr = v(&mut rng, 5.0);
+            let hb = Vec3::new(rng.gen_range(0.01..1.0), rng.gen_range(0.01..1.0), rng.gen_range(0.01..1.0));
+            let bx = Aabb::new(ctr - hb, ctr + hb);
+            let pl = Plane::new(v(&mut rng, 1.0).as_dvec3(), rng.gen_range(-3.0..3.0)).unwrap();
+            let (tb, tp) = (f.touches_box(&bx), f.touches_plane(&pl));
+            culled += (!tb) as u32 + (!tp) as u32;
+            for _ in 0..100 {
+                let o = c + (v(&mut rng, 1.0)) * h;
+                let p = o + dir * rng.gen_range(0.0..20.0);
                 assert!(tb || !bx.contains(p), "box {bx:?} culled but holds {p}");
                 assert!(tp || pl.n.dot(p.as_dvec3()) > pl.d, "plane {pl:?} culled but holds {p}");
             }
