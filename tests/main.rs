@@ -11,3 +11,4 @@ mod leaf_oracle;
 mod oracle;
 mod povray;
 mod render_flat;
+mod split;
