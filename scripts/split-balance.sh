@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The balance of `render --tile I/N`: for each scene, the trace time of every
-# part (`rothray bench --tile I/N`, the fastest of R runs after a warm-up, bake
-# excluded, one thread: the least disturbed by other load on a shared machine)
+# part (`rothray bench --tile I/N`: process CPU time, the least of R runs after
+# a warm-up, bake excluded, one thread: the least disturbed by other load on a
+# shared machine; ROTHRAY_BALANCE_CLOCK=wall takes wall time instead)
 # and the imbalance max/mean, for the interleaved split (the default) and
 # contiguous bands. `whole_s` is the whole image's time the same way; the sum
 # of the parts over it is the split's overhead.
@@ -14,6 +15,8 @@ n=${1:-8}
 size=${2:-1920x1080}
 reps=${3:-5}
 export RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1}
+key=trace_cpu_s_all
+[ "${ROTHRAY_BALANCE_CLOCK:-cpu}" = wall ] && key=trace_s_all
 shift $(($# < 3 ? $# : 3))
 scenes=("$@")
 [ ${#scenes[@]} -gt 0 ] || scenes=(scenes/*.json)
@@ -24,12 +27,12 @@ h=${size#*x}
 printf '%-12s %-12s %9s %9s %9s %9s %9s\n' scene split whole_s sum/whole mean_s max_s max/mean
 for sc in "${scenes[@]}"; do
   whole=$("$bin" bench "$sc" --width "$w" --height "$h" --repeats "$reps" --json | tail -n 1 |
-    python3 -c 'import json,sys; print(min(json.load(sys.stdin)["trace_s_all"]))')
+    python3 -c 'import json,sys; print(min(json.load(sys.stdin)[sys.argv[1]]))' "$key")
   for split in interleaved bands; do
     ts=()
     for ((i = 0; i < n; i++)); do
       ts+=("$("$bin" bench "$sc" --width "$w" --height "$h" --repeats "$reps" --json --tile "$i/$n" --split "$split" | tail -n 1 |
-        python3 -c 'import json,sys; print(min(json.load(sys.stdin)["trace_s_all"]))')")
+        python3 -c 'import json,sys; print(min(json.load(sys.stdin)[sys.argv[1]]))' "$key")")
     done
     python3 - "$(basename "$sc" .json)" "$split" "$whole" "${ts[@]}" <<'PY'
 import sys

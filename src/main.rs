@@ -411,13 +411,15 @@ fn run(cli: Cli) -> Result<()> {
                 s.ambient = 1.0;
             }
             let mut times = Vec::new();
+            let mut cpu = Vec::new();
             let mut stats = Default::default();
             // One warm-up render (page faults, thread pool start), then the timed ones.
             let _ = render(&rs, &sf.camera, &s, &|_, _| {});
             for _ in 0..repeats.max(1) {
-                let t = Instant::now();
+                let (t, c) = (Instant::now(), process_cpu_s());
                 let (_, st) = render(&rs, &sf.camera, &s, &|_, _| {});
                 times.push(t.elapsed().as_secs_f64());
+                cpu.push(process_cpu_s() - c);
                 stats = st;
             }
             times.sort_by(f64::total_cmp);
@@ -446,6 +448,7 @@ fn run(cli: Cli) -> Result<()> {
                     "bake_s": bake.as_secs_f64(),
                     "trace_s_median": med,
                     "trace_s_all": times,
+                    "trace_cpu_s_all": cpu,
                     "mrays_per_s": rays as f64 / med / 1e6,
                 });
                 println!("{j}");
@@ -453,6 +456,18 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// CPU time of the whole process (all threads), seconds: unlike wall time it
+/// does not count the time other processes hold the cores (`bench --json`'s
+/// `trace_cpu_s_all`, used by scripts/split-balance.sh on shared machines).
+fn process_cpu_s() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes one timespec through a valid pointer.
+    if unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) } != 0 {
+        return f64::NAN;
+    }
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
 }
 
 fn split_of(s: SplitArg) -> Split {
