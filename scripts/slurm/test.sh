@@ -30,11 +30,11 @@ if [ ${#need[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need[@]}" >/dev/null || die "could not install ${need[*]}"
 fi
 
-t_start=$(date +%s)
 target=${CARGO_TARGET_DIR:-$root/target}
 cargo build --release -q
 bin=$target/release/rothray
 [ -x "$bin" ] || die "no binary at $bin"
+t_start=$(date +%s)  # after the build: the times below are Slurm's
 
 tmp=$(mktemp -d /tmp/rothray-slurm.XXXXXX)
 chmod 700 "$tmp"
@@ -87,7 +87,7 @@ for _ in $(seq 50); do [ -S "$tmp/munge.sock" ] && break; sleep 0.1; done
 export SLURM_CONF=$tmp/slurm.conf
 cat >"$SLURM_CONF" <<EOF
 ClusterName=rothray-test
-SlurmctldHost=$host
+SlurmctldHost=$host(127.0.0.1)
 SlurmUser=root
 SlurmdUser=root
 AuthType=auth/munge
@@ -112,7 +112,7 @@ JobAcctGatherType=jobacct_gather/none
 MpiDefault=none
 ReturnToService=2
 MinJobAge=600
-NodeName=$host CPUs=$cpus State=UNKNOWN
+NodeName=$host NodeAddr=127.0.0.1 CPUs=$cpus State=UNKNOWN
 PartitionName=test Nodes=$host Default=YES MaxTime=INFINITE State=UP
 EOF
 
