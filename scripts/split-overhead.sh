@@ -26,7 +26,7 @@ for sc in "${scenes[@]}"; do
   name=$(basename "$sc" .json)
   rs=()
   for ((r = 0; r < rounds; r++)); do
-    t0=$(now); "$bin" render "$sc" --width "$w" --height "$h" -o "$tmp/one.png"; t1=$(now)
+    t0=$(now); "$bin" render "$sc" --width "$w" --height "$h" -o "$tmp/one.png" 2>/dev/null; t1=$(now)
     rs+=("$(python3 -c "print($t1 - $t0)")")
   done
   one=$(best "${rs[@]}")
@@ -36,7 +36,7 @@ for sc in "${scenes[@]}"; do
       rm -f "$tmp"/p-*.part
       t0=$(now)
       for ((i = 0; i < n; i++)); do
-        "$bin" render "$sc" --width "$w" --height "$h" --tile "$i/$n" -o "$tmp/p-$i.part"
+        "$bin" render "$sc" --width "$w" --height "$h" --tile "$i/$n" -o "$tmp/p-$i.part" 2>/dev/null
       done
       "$bin" merge "$tmp"/p-*.part -o "$tmp/merged.png"
       t1=$(now)
