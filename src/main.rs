@@ -43,7 +43,7 @@ struct ImageArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum SplitArg {
-    /// Chunk c of 4 rows goes to part c mod N.
+    /// Row of tiles c (8 pixel rows) goes to part c mod N.
     Interleaved,
     /// Contiguous bands of rows (worse balanced; kept for comparison).
     Bands,
@@ -95,8 +95,8 @@ enum Cmd {
         #[arg(long, value_enum, default_value = "shaded")]
         aov: AovArg,
         /// Render only part I of N (0 <= I < N) and write it, unencoded, as a
-        /// part file; `rothray merge` makes the PNG from all N parts. Chunks of
-        /// 4 rows are dealt out in turn (chunk c to part c mod N). With Slurm:
+        /// part file; `rothray merge` makes the PNG from all N parts. Rows of
+        /// tiles (8 pixel rows) are dealt out in turn (row of tiles c to part c mod N). With Slurm:
         /// --tile $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
         #[arg(long, value_name = "I/N", value_parser = parse_tile)]
         tile: Option<(u32, u32)>,
@@ -297,7 +297,7 @@ fn run(cli: Cli) -> Result<()> {
                 // The bytes whose hash the part records (read again: the loader
                 // does not keep them).
                 let bytes = std::fs::read(&scene).map_err(|e| BadInput(format!("{}: cannot read: {e}", scene.display())))?;
-                let prog = Progress::start(s.part.rows(s.height as usize).len(), "render part");
+                let prog = Progress::start(s.part.rows(s.height as usize, rothray_engine::tile_size().1).len(), "render part");
                 let done = prog.done.clone();
                 let px = render_raw(&rs, &sf.camera, &s, &|d, _| {
                     done.fetch_max(d, Ordering::Relaxed);
@@ -450,6 +450,7 @@ fn run(cli: Cli) -> Result<()> {
                     "trace_s_all": times,
                     "trace_cpu_s_all": cpu,
                     "mrays_per_s": rays as f64 / med / 1e6,
+                    "counters": bench_counters(&stats, rays),
                 });
                 println!("{j}");
             }
@@ -475,6 +476,25 @@ fn split_of(s: SplitArg) -> Split {
         SplitArg::Interleaved => Split::Interleaved,
         SplitArg::Bands => Split::Bands,
     }
+}
+
+/// What one frame skipped and did (the last timed render): tiles, the tile
+/// programs, and the evaluation per ray.
+fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::Value {
+    let t = &st.tiles;
+    let per = |x: u64, n: u64| if n == 0 { 0.0 } else { x as f64 / n as f64 };
+    serde_json::json!({
+        "tiles": t.tiles,
+        "tiles_culled": t.tiles_culled,
+        "objects_per_tile": per(t.objects_kept, t.tiles),
+        "leaves_pruned_per_tile": per(t.spec.leaves_pruned, t.tiles),
+        "leaves_kept_per_tile": per(t.spec.leaves_kept, t.tiles),
+        "wide_queries_per_tile": per(t.spec.wide_queries, t.tiles),
+        "tile_nodes_written": t.spec.nodes_written,
+        "leaves_asked_per_ray": per(st.eval.leaves, rays),
+        "wide_children_visited": st.eval.wide_children,
+        "early_outs": st.eval.early_outs,
+    })
 }
 
 fn csv(s: &str) -> String {

@@ -208,7 +208,7 @@ fn bitten_mesh_packets_match_single_rays() {
                 scene.intersect_packet(&packet, &mut ps, &mut out);
                 // The renderer's variant without normals (pictures without lights).
                 let mut bare = [None; 8];
-                scene.intersect_packet_with(&packet, &mut ps, &mut bare, false);
+                scene.intersect_packet_with(&packet, &mut ps, &mut bare, false, None);
                 for k in 0..8 {
                     let one = scene.intersect(&packet[k]);
                     let key = |h: Option<rothray::engine::Hit>| h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub, h.normal.to_array().map(f32::to_bits)));

@@ -12,3 +12,4 @@ mod oracle;
 mod povray;
 mod render_flat;
 mod split;
+mod tiles;

@@ -75,8 +75,8 @@ fn merge_is_the_single_render_for_every_aov_and_spp() {
     for (tag, sc) in [("sampler", scene("sampler.json")), ("flat", flat)] {
         for aov in ["shaded", "depth", "normal", "id"] {
             for spp in ["1", "3"] {
-                // 30 rows: 8 chunks of 4 rows, the last one of 2; with N = 7
-                // part 0 holds two chunks and part 6 one.
+                // 30 rows: 4 rows of 8-pixel tiles, the last one 6 high; with
+                // N = 3 part 0 holds two, with N = 7 parts 4 to 6 hold none.
                 let flags = ["--width", "41", "--height", "30", "--spp", spp, "--aov", aov];
                 check_exact(&dir, &format!("{tag}-{aov}-{spp}"), &sc, &flags, &[1, 3, 7]);
             }
@@ -161,6 +161,14 @@ fn bad_parts_are_refused_and_the_output_kept() {
         refused(&m, &q, &["other settings"]);
         kept(tag);
     }
+
+    // Another tile size (the tiles' programs, so possibly the pixels, differ).
+    let q = dir.join("tile32.part");
+    let out32 = rothray().env("ROTHRAY_TILE", "32x16").arg("render").arg(&sc).arg("-o").arg(&q).args(["--tile", "2/3"]).args(flags).output().unwrap();
+    ok(&out32, "ROTHRAY_TILE=32x16");
+    let m = merge(&[p[0].clone(), p[1].clone(), q.clone()], &out);
+    refused(&m, &q, &["tile size", "32x16"]);
+    kept("tile size");
 
     // Another N.
     let q = part(&dir, "n4", &sc, &flags, 2, 4);

@@ -16,8 +16,12 @@
 //!   first entry they have confirmed.
 #![warn(missing_docs)]
 
+pub mod counts;
 pub mod program;
 pub mod spans;
+pub mod tile;
 
 pub use program::{first_surface, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 pub use spans::{combine, spill_count, Op, SpanList};
+pub use counts::{take_eval_counts, EvalCounts};
+pub use tile::{TileCounts, TileProgram};

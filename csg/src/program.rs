@@ -2,9 +2,17 @@
 //! before parents), evaluated per ray without recursion (so a nesting depth of
 //! 10 000 is fine) with Roth's early outs and a BVH inside every wide node.
 
-use glam::Vec3;
-use rothray_primitives::{bvh::FlatBvh, table::push_clipped, Aabb, LeafTable, Span, SpanSink, Surf};
+use std::sync::Arc;
 
+use glam::Vec3;
+use rothray_primitives::{
+    bvh::FlatBvh,
+    polytope::{polytope_box, Plane},
+    table::push_clipped,
+    Aabb, LeafKind, LeafTable, Span, SpanSink, Surf,
+};
+
+use crate::counts;
 use crate::spans::{combine_into, Op, SpanList};
 
 /// Nodes with more children than this get a BVH over their children.
@@ -41,6 +49,10 @@ pub struct Wide {
     pub bvh: FlatBvh,
     /// Positions of children with unbounded boxes (always visited).
     pub unbounded: Vec<u32>,
+    /// A binary tree over the same boxes for region queries (tiles ask it
+    /// which children their rays can meet; the `CwBvh` of `bvh` has no such
+    /// query).
+    pub cull: FlatBvh,
 }
 
 /// All CSG trees of a scene, SoA, children before parents.
@@ -60,8 +72,15 @@ pub struct Program {
     pub leafy: Vec<bool>,
     /// Child node ids of the inner nodes.
     pub children: Vec<u32>,
-    /// BVHs of wide nodes.
-    pub wides: Vec<Wide>,
+    /// BVHs of wide nodes (shared with the per-tile copies of the program).
+    pub wides: Arc<Vec<Wide>>,
+    /// Wide nodes of a tile's own (indices from `wides.len()` on; see
+    /// [`crate::TileProgram`]); the first `local_len` are in use.
+    pub local_wides: Vec<Wide>,
+    /// How many of `local_wides` are in use.
+    pub local_len: usize,
+    /// Tells bakes apart (per-tile copies follow the program they copy).
+    pub id: u64,
 }
 
 /// Per-ray constants.
@@ -233,6 +252,7 @@ impl<'a> MemoLanes<'a> {
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn leaf_spans<S: SpanSink + ?Sized>(leaves: &LeafTable, ray: &RayCtx, i: u32, lo: f32, hi: f32, nearest: Option<f32>, out: &mut S) -> f32 {
+    counts::leaf();
     if let (Some((memo, k)), Some(_)) = (ray.memo, nearest) {
         if let Some(v) = memo.serve(k, i, lo, hi, out) {
             return v;
@@ -328,15 +348,8 @@ impl<'a> ProgramBuilder<'a> {
                 flat.push(c);
             }
         }
+        let bounds = self.node_bounds(kind, &flat);
         let p = &mut self.program;
-        let bounds = match kind {
-            NodeKind::Union => flat.iter().fold(Aabb::EMPTY, |b, &c| b.union(&p.bounds[c as usize])),
-            NodeKind::Intersection => {
-                flat.iter().fold(Aabb::INFINITE, |b, &c| b.intersection(&p.bounds[c as usize]))
-            }
-            _ => p.bounds[flat[0] as usize],
-        };
-        let bounds = if bounds.is_empty() { Aabb::EMPTY } else { bounds };
         let first = p.children.len() as u32;
         p.children.extend_from_slice(&flat);
         // A BVH for wide unions (all children) and wide differences (subtrahends).
@@ -362,8 +375,12 @@ impl<'a> ProgramBuilder<'a> {
             for x in bvh.prims.iter_mut() {
                 *x = ids[*x as usize];
             }
+            let mut cull = FlatBvh::build_cull(&boxes, 4);
+            for x in cull.prims.iter_mut() {
+                *x = ids[*x as usize];
+            }
             wide = p.wides.len() as u32;
-            p.wides.push(Wide { bvh, unbounded });
+            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, cull });
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);
@@ -376,13 +393,84 @@ impl<'a> ProgramBuilder<'a> {
         id
     }
 
+    /// Bounds of a new node over `flat` by Roth's rules: a union encloses its
+    /// operands, an intersection is their overlap, a difference its positive
+    /// operand. Half-spaces and boxes (under any affine map) among the operands
+    /// of an intersection are kept as planes, and so are half-spaces subtracted
+    /// from a difference (as their complements): the box is then that of the
+    /// polytope they cut from the other operands' box ([`polytope_box`]), so an
+    /// intersection of half-spaces alone gets a finite box.
+    fn node_bounds(&self, kind: NodeKind, flat: &[u32]) -> Aabb {
+        let p = &self.program;
+        let mut planes = Vec::new();
+        let leaf_planes = |c: u32, flip: bool, planes: &mut Vec<Plane>| -> (bool, bool) {
+            if p.kind[c as usize] != NodeKind::Leaf {
+                return (false, false);
+            }
+            let at = planes.len();
+            let leaf = p.first[c as usize];
+            let is_half = self.leaves.kind[leaf as usize] == LeafKind::HalfSpace;
+            if flip && !is_half {
+                return (false, false); // a box's complement is not convex
+            }
+            let poly = self.leaves.world_planes(leaf, planes);
+            if flip {
+                for q in &mut planes[at..] {
+                    *q = q.flipped();
+                }
+            }
+            (poly, is_half)
+        };
+        let bounds = match kind {
+            NodeKind::Union => flat.iter().fold(Aabb::EMPTY, |b, &c| b.union(&p.bounds[c as usize])),
+            NodeKind::Intersection => {
+                // Worth it with a half-space, or with two boxes (rotated boxes
+                // overlap in less than the overlap of their boxes).
+                let (mut half, mut polys) = (false, 0);
+                for &c in flat {
+                    let (poly, h) = leaf_planes(c, false, &mut planes);
+                    half |= h;
+                    polys += poly as u32;
+                }
+                let clip = flat.iter().fold(Aabb::INFINITE, |b, &c| b.intersection(&p.bounds[c as usize]));
+                if half || polys >= 2 { polytope_box(&planes, &clip) } else { clip }
+            }
+            _ => {
+                let mut half = false;
+                for &c in &flat[1..] {
+                    half |= leaf_planes(c, true, &mut planes).1;
+                }
+                let clip = p.bounds[flat[0] as usize];
+                if half {
+                    leaf_planes(flat[0], false, &mut planes);
+                    polytope_box(&planes, &clip)
+                } else {
+                    clip
+                }
+            }
+        };
+        if bounds.is_empty() { Aabb::EMPTY } else { bounds }
+    }
+
     /// Finishes.
-    pub fn finish(self) -> Program {
+    pub fn finish(mut self) -> Program {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        self.program.id = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.program
     }
 }
 
 impl Program {
+    /// The BVH of wide node `n`.
+    #[inline(always)]
+    fn wide_of(&self, n: usize) -> &Wide {
+        let w = self.wide[n] as usize;
+        match self.wides.get(w) {
+            Some(x) => x,
+            None => &self.local_wides[w - self.wides.len()],
+        }
+    }
+
     /// Evaluates node `root` on the ray over `[tmin, tmax]`; the spans land in
     /// `scratch.out`. Returns the parameter up to which the result is exact
     /// (`tmax` unless [`Mode::Nearest`] let a union stop early). A boundary
@@ -611,6 +699,7 @@ impl Program {
                 _ => {
                     let s = acc.as_slice();
                     if s.is_empty() {
+                        counts::early_out();
                         return valid;
                     }
                     lo = lo.max(s[0].t0);
@@ -636,12 +725,13 @@ impl Program {
         tmp: &mut SpanList,
         acc: &mut SpanList,
     ) -> f32 {
-        let w = &self.wides[self.wide[n] as usize];
+        let w = self.wide_of(n);
         let first = self.first[n];
         // `hi`: the working range's end; `valid`: where the result stops being exact.
         let mut hi = tmax;
         let mut valid = f32::INFINITY;
         let mut visit = |pos: u32, acc: &mut SpanList, hi: &mut f32, valid: &mut f32| {
+            counts::wide_child();
             let c = self.children[(first + pos) as usize];
             leaf.clear();
             let v = leaf_spans(leaves, ray, self.first[c as usize], tmin, *hi, ray.nearest(mode), leaf);
@@ -678,13 +768,14 @@ impl Program {
     /// Candidates of wide node `n` (children at positions >= `skip`) along `[tmin, tmax]`,
     /// sorted by box entry.
     fn collect(&self, n: usize, skip: u32, ray: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) {
-        let w = &self.wides[self.wide[n] as usize];
+        let w = self.wide_of(n);
         let lo = scratch.cand.len();
         let cand = &mut scratch.cand;
         w.bvh.traverse(ray.o, ray.inv_d, tmin, tmax, |pos, _| {
             let c = self.children[(self.first[n] + pos) as usize];
             if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.o, ray.inv_d, tmin, tmax) {
                 cand.push((pos, t0));
+                counts::wide_child();
             }
             tmax
         });
@@ -695,7 +786,10 @@ impl Program {
         }
         let s = &mut cand[lo..];
         if s.len() > 1 {
-            s.sort_unstable_by(|a, b| a.1.total_cmp(&b.1));
+            // By entry, then by position: a total order, so the candidates are
+            // taken in the same order whichever tree listed them (a tile's
+            // short list or the baked BVH).
+            s.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         }
     }
 
@@ -748,11 +842,13 @@ impl Program {
                     NodeKind::Intersection => {
                         scratch.accs[top].clear();
                         scratch.frames[top].done = true;
+                        counts::early_out();
                         return None;
                     }
                     _ => {
                         if f.next == 1 {
                             f.done = true;
+                            counts::early_out();
                             return None;
                         }
                         continue;
@@ -793,6 +889,7 @@ impl Program {
             NodeKind::Intersection | NodeKind::Difference => {
                 if acc.is_empty() {
                     f.done = true;
+                    counts::early_out();
                 } else {
                     // Later operands only matter over the current extent.
                     let s = acc.as_slice();

@@ -1,12 +1,10 @@
 //! Which pixels one part of a split render holds (`rothray render --tile I/N`).
 //!
-//! The renderer works on chunks of [`CHUNK_ROWS`] image rows; a part is a set of
-//! whole chunks, so a part's pixels go through exactly the same packets, tiles
-//! and jitter (a hash of the pixel index and the sample) as in the whole image,
-//! and a merge of all parts is bit for bit the single render.
-
-/// Rows per chunk: the renderer's unit of work (`ROWS` in `render`).
-pub const CHUNK_ROWS: usize = 4;
+//! The renderer works on chunks of image rows, one row of tiles each (the
+//! tile height of [`crate::tile_size`], 8); a part is a set of whole chunks, so
+//! a part's pixels go through exactly the same tiles (and tile programs),
+//! packets and jitter (a hash of the pixel index and the sample) as in the
+//! whole image, and a merge of all parts is bit for bit the single render.
 
 /// How the chunks are dealt out to the parts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -51,10 +49,10 @@ impl Part {
     /// The whole image as one part.
     pub const WHOLE: Part = Part { index: 0, count: 1, split: Split::Interleaved };
 
-    /// The chunks (of [`CHUNK_ROWS`] rows) of an image `height` rows high that
+    /// The chunks (of `chunk_rows` rows) of an image `height` rows high that
     /// this part holds, in increasing order.
-    pub fn chunks(&self, height: usize) -> Vec<usize> {
-        let n = height.div_ceil(CHUNK_ROWS);
+    pub fn chunks(&self, height: usize, chunk_rows: usize) -> Vec<usize> {
+        let n = height.div_ceil(chunk_rows.max(1));
         let (i, k) = (self.index as usize, self.count.max(1) as usize);
         match self.split {
             Split::Interleaved => (i..n).step_by(k).collect(),
@@ -63,8 +61,9 @@ impl Part {
     }
 
     /// The image rows this part holds, in increasing order.
-    pub fn rows(&self, height: usize) -> Vec<usize> {
-        self.chunks(height).into_iter().flat_map(|c| c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(height)).collect()
+    pub fn rows(&self, height: usize, chunk_rows: usize) -> Vec<usize> {
+        let r = chunk_rows.max(1);
+        self.chunks(height, r).into_iter().flat_map(|c| c * r..((c + 1) * r).min(height)).collect()
     }
 }
 
@@ -75,11 +74,11 @@ mod tests {
     #[test]
     fn parts_cover_every_row_once() {
         for split in [Split::Interleaved, Split::Bands] {
-            for h in [1usize, 3, 4, 5, 24, 37, 1080] {
+            for (h, cr) in [(1usize, 8), (3, 4), (4, 4), (5, 2), (24, 8), (37, 8), (1080, 8), (1080, 4)] {
                 for n in 1..=9u32 {
                     let mut seen = vec![0u8; h];
                     for i in 0..n {
-                        let rows = Part { index: i, count: n, split }.rows(h);
+                        let rows = Part { index: i, count: n, split }.rows(h, cr);
                         assert!(rows.windows(2).all(|w| w[0] < w[1]));
                         for r in rows {
                             seen[r] += 1;

@@ -17,6 +17,7 @@ use rothray_primitives::{
 use std::sync::Arc;
 
 use crate::components::*;
+use crate::tile::TileView;
 
 /// A ray `origin + t * dir`, `t` in `[tmin, tmax]` (t is in units of `dir`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -149,6 +150,8 @@ pub struct RenderScene {
     /// Per leaf: entity, name, colour, object.
     pub leaf_info: Vec<LeafInfo>,
     objects_bvh: FlatBvh,
+    /// A binary tree over the same boxes, for region queries (tiles).
+    objects_cull: FlatBvh,
     unbounded: Vec<u32>,
     /// Bounds of the finite objects.
     pub bounds: Aabb,
@@ -630,6 +633,10 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     for p in bvh.prims.iter_mut() {
         *p = ids[*p as usize];
     }
+    let mut cull = FlatBvh::build_cull(&boxes, 2);
+    for p in cull.prims.iter_mut() {
+        *p = ids[*p as usize];
+    }
     if bounds.is_empty() {
         // Only unbounded solids (or none): take the leaves' finite parts.
         for lb in &leaves.bounds {
@@ -644,6 +651,7 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     scene.objects = objects;
     scene.leaf_info = leaf_info;
     scene.objects_bvh = bvh;
+    scene.objects_cull = cull;
     scene.unbounded = unbounded;
     let mut pm = nearest_mode_meshes(&scene.program, &scene.leaves, scene.objects.iter().map(|o| o.root));
     if pm.len() > PACKET_MESHES {
@@ -707,6 +715,15 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     Ok(())
 }
 
+/// An object as one query evaluates it: its root in a program (the baked one
+/// or a tile's), and its index.
+#[derive(Clone, Copy)]
+struct ObjRef<'a> {
+    prog: &'a Program,
+    root: u32,
+    oi: u32,
+}
+
 enum ProgOp {
     Leaf(u32),
     Op(Op, u32),
@@ -744,6 +761,16 @@ impl RenderScene {
         self.unbounded.is_empty()
     }
 
+    /// The objects without finite bounds.
+    pub(crate) fn unbounded_objects(&self) -> &[u32] {
+        &self.unbounded
+    }
+
+    /// A binary tree over the bounded objects' boxes (ids: object indices).
+    pub(crate) fn objects_cull(&self) -> &FlatBvh {
+        &self.objects_cull
+    }
+
     /// Object index of an entity (a top-level object).
     pub fn object_of(&self, e: Entity) -> Option<u32> {
         self.objects.iter().position(|o| o.entity == e).map(|i| i as u32)
@@ -761,9 +788,9 @@ impl RenderScene {
 
     /// First surface of object `oi` within `[tmin, tmax]`: `(t, surface)`.
     #[inline]
-    fn object_first(&self, oi: u32, ctx: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) -> Option<(f32, Surf)> {
-        let root = self.objects[oi as usize].root;
-        let valid = self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
+    fn object_first(&self, obj: ObjRef, ctx: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) -> Option<(f32, Surf)> {
+        let ObjRef { prog, root, oi } = obj;
+        let valid = prog.eval(&self.leaves, root, ctx, tmin, tmax, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
         // An exit (the ray starts inside) close to where the result stops being
         // exact is not sure (see `Program::eval`; found by a packet-against-
@@ -782,7 +809,7 @@ impl RenderScene {
             // instructions; windows of 0.05-0.25 gave 213e6-204e6.
             let w = self.redo_window[oi as usize];
             let t1 = if w > 0.0 { valid + w / ctx.d.length() } else { tmax };
-            return self.redo(root, ctx, tmin, t1, tmax, scratch);
+            return self.redo(obj, ctx, (tmin, t1, tmax), scratch);
         }
         f
     }
@@ -792,17 +819,29 @@ impl RenderScene {
     /// clear of `t1` (16 eps: clipping at `t1` changes the result only within a
     /// few eps of it, where boundaries fuse and short spans are dropped), else
     /// over the whole range.
-    fn redo(&self, root: u32, ctx: &RayCtx, tmin: f32, t1: f32, tmax: f32, scratch: &mut Scratch) -> Option<(f32, Surf)> {
+    fn redo(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
+        let ObjRef { prog, root, .. } = obj;
+        let (tmin, t1, tmax) = range;
         if t1 < tmax {
-            self.program.eval(&self.leaves, root, ctx, tmin, t1, Mode::All, scratch);
+            prog.eval(&self.leaves, root, ctx, tmin, t1, Mode::All, scratch);
             if let Some((t, s)) = first_surface(scratch.out.as_slice()) {
                 if t < t1 - 16.0 * ctx.eps {
                     return Some((t, s));
                 }
             }
         }
-        self.program.eval(&self.leaves, root, ctx, tmin, tmax, Mode::All, scratch);
+        prog.eval(&self.leaves, root, ctx, tmin, tmax, Mode::All, scratch);
         first_surface(scratch.out.as_slice())
+    }
+
+    /// Object `oi` as the rays of `tile` see it (`None`: they cannot meet it),
+    /// or as baked without a tile.
+    #[inline(always)]
+    fn obj_ref<'a>(&'a self, oi: u32, tile: Option<&TileView<'a>>) -> Option<ObjRef<'a>> {
+        match tile {
+            Some(t) => t.root(oi).map(|root| ObjRef { prog: t.prog, root, oi }),
+            None => Some(ObjRef { prog: &self.program, root: self.objects[oi as usize].root, oi }),
+        }
     }
 
     /// Nearest hit with caller-provided scratch (no thread-local access).
@@ -811,7 +850,7 @@ impl RenderScene {
             return None;
         }
         let ctx = self.ray_ctx(ray.origin, ray.dir);
-        self.intersect_ctx(ray, &ctx, scratch, true)
+        self.intersect_ctx(ray, &ctx, scratch, true, None)
     }
 
     /// Nearest hits of up to eight rays (`out[k]` for `rays[k]`), the same as
@@ -824,14 +863,16 @@ impl RenderScene {
     /// containing mesh, or the packet shortcut of the README), else its CSG is
     /// evaluated with them.
     pub fn intersect_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>]) {
-        self.intersect_packet_with(rays, ps, out, true);
+        self.intersect_packet_with(rays, ps, out, true, None);
     }
 
     /// [`RenderScene::intersect_packet`]; without `normals` every hit's `normal`
     /// is left zero (a picture without lights does not read it: the normal of
-    /// a mesh triangle was ~6% of a frame of scenes/bunny).
+    /// a mesh triangle was ~6% of a frame of scenes/bunny). With `tile`, the
+    /// rays (all inside the region it was prepared for) evaluate the tile's
+    /// programs, with the same answers.
     #[doc(hidden)]
-    pub fn intersect_packet_with(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool) {
+    pub fn intersect_packet_with(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
         let n = rays.len().min(out.len());
         if n == 0 {
             return;
@@ -845,7 +886,7 @@ impl RenderScene {
         if !packet {
             for k in 0..n {
                 out[k] = if rays[k].is_valid() {
-                    self.intersect_ctx(&rays[k], &self.ray_ctx(rays[k].origin, rays[k].dir), &mut ps.scratch, normals)
+                    self.intersect_ctx(&rays[k], &self.ray_ctx(rays[k].origin, rays[k].dir), &mut ps.scratch, normals, tile)
                 } else {
                     None
                 };
@@ -939,7 +980,7 @@ impl RenderScene {
                     continue;
                 }
             }
-            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch, normals);
+            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch, normals, tile);
         }
     }
 
@@ -950,11 +991,13 @@ impl RenderScene {
         !self.packet_meshes.is_empty() && self.packet_cover.is_some()
     }
 
-    fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch, normals: bool) -> Option<Hit> {
+    fn intersect_ctx(&self, ray: &Ray, ctx: &RayCtx, scratch: &mut Scratch, normals: bool, tile: Option<&TileView>) -> Option<Hit> {
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
+        // Objects in the same order with or without a tile: ties go the same way.
         for &oi in &self.unbounded {
-            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
+            let Some(obj) = self.obj_ref(oi, tile) else { continue };
+            if let Some((t, s)) = self.object_first(obj, ctx, ray.tmin, best_t, scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -962,7 +1005,8 @@ impl RenderScene {
             }
         }
         self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, best_t, |oi, _| {
-            if let Some((t, s)) = self.object_first(oi, ctx, ray.tmin, best_t, scratch) {
+            let Some(obj) = self.obj_ref(oi, tile) else { return best_t };
+            if let Some((t, s)) = self.object_first(obj, ctx, ray.tmin, best_t, scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -1075,13 +1119,15 @@ impl RenderScene {
         }
         let ctx = self.ray_ctx(ray.origin, ray.dir);
         for &oi in &self.unbounded {
-            if self.object_first(oi, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
+            let obj = self.obj_ref(oi, None).expect("no tile");
+            if self.object_first(obj, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
                 return true;
             }
         }
         let mut hit = false;
         self.objects_bvh.traverse(ctx.o, ctx.inv_d, ray.tmin, ray.tmax, |oi, _| {
-            if self.object_first(oi, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
+            let obj = self.obj_ref(oi, None).expect("no tile");
+            if self.object_first(obj, &ctx, ray.tmin, ray.tmax, scratch).is_some() {
                 hit = true;
                 return f32::NEG_INFINITY;
             }

@@ -105,13 +105,16 @@ pub struct PartSettings {
     pub ambient: f32,
     /// How chunks of rows are dealt out (`interleaved`, `bands`).
     pub split: String,
+    /// The renderer's tile size (width, height): a chunk is one row of tiles,
+    /// and the tiles' programs are the same only for the same tiles.
+    pub tile: [usize; 2],
     /// The rothray version that rendered it (another build may round differently).
     pub rothray: String,
 }
 
 impl PartSettings {
-    /// The settings of a render.
-    pub fn of(s: &RenderSettings) -> PartSettings {
+    /// The settings of a render made with tiles of `tile` pixels.
+    pub fn of(s: &RenderSettings, tile: (usize, usize)) -> PartSettings {
         PartSettings {
             width: s.width,
             height: s.height,
@@ -119,6 +122,7 @@ impl PartSettings {
             aov: aov_name(s.aov).into(),
             ambient: s.ambient,
             split: s.part.split.name().into(),
+            tile: [tile.0, tile.1],
             rothray: env!("CARGO_PKG_VERSION").into(),
         }
     }
@@ -145,6 +149,10 @@ impl PartSettings {
         }
         if self.split != o.split {
             return d("--split", &self.split, &o.split);
+        }
+        if self.tile != o.tile {
+            let t = |t: [usize; 2]| format!("{}x{}", t[0], t[1]);
+            return d("tile size (ROTHRAY_TILE)", &t(self.tile), &t(o.tile));
         }
         if self.ambient.to_bits() != o.ambient.to_bits() {
             return d("ambient", &self.ambient, &o.ambient);
@@ -210,7 +218,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> std::io::Result<()
 
 /// Writes the part of a render: `scene_bytes` is the scene file as read.
 pub fn write_part(path: &Path, scene: &Path, scene_bytes: &[u8], s: &RenderSettings, px: &RawPixels) -> std::io::Result<()> {
-    let settings = PartSettings::of(s);
+    let settings = PartSettings::of(s, px.tile);
     // The payload, without a copy of the pixels.
     let depth = s.aov == Aov::Depth;
     let values = || -> Box<dyn Iterator<Item = f32> + '_> {
@@ -338,7 +346,7 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged, String> {
             return Err(format!("{name}: repeated part {}/{n}: {} holds it too", h.index, parts[o].path.display()));
         }
         owner[h.index as usize] = Some(k);
-        let want = row_ranges(&Part { index: h.index, count: n, split }.rows(st.height as usize));
+        let want = row_ranges(&Part { index: h.index, count: n, split }.rows(st.height as usize, st.tile[1]));
         if h.rows != want {
             return Err(format!("{name}: damaged header: its rows are not those of part {}/{n}", h.index));
         }

@@ -106,6 +106,29 @@ impl FlatBvh {
         FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None, boxes: Vec::new() }
     }
 
+    /// [`FlatBvh::build_binary`] with obvhs' fastest preset: for region
+    /// queries (tiles), where a looser tree costs little and the bake of
+    /// `scenes/forest` (10 000 boxes) took 50 ms more with the medium preset.
+    pub fn build_cull(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
+        if boxes.len() <= max_leaf as usize {
+            return FlatBvh::build(boxes, max_leaf);
+        }
+        let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
+        let mut params = BvhBuildParams::fastest_build();
+        params.max_prims_per_leaf = max_leaf.max(1);
+        let mut t = std::time::Duration::ZERO;
+        let b2 = build_bvh2(&oboxes, params, &mut t);
+        let nodes = b2
+            .nodes
+            .iter()
+            .map(|n| {
+                let a = n.aabb();
+                BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
+            })
+            .collect();
+        FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None, boxes: Vec::new() }
+    }
+
     /// Root box (empty for an empty BVH).
     pub fn bounds(&self) -> Aabb {
         self.nodes.first().map(|n| Aabb::new(n.min, n.max)).unwrap_or(Aabb::EMPTY)
@@ -192,6 +215,41 @@ impl FlatBvh {
                 (Some((ta, _)), None) => stack.push((n.first, ta)),
                 (None, Some((tb, _))) => stack.push((n.first + 1, tb)),
                 _ => {}
+            }
+        }
+    }
+
+    /// Visits every primitive of a leaf whose box, and every ancestor's box,
+    /// passes `test` (a superset of the primitives whose own box passes: callers
+    /// test those themselves). Binary trees ([`FlatBvh::build_binary`]) walk
+    /// their nodes; a `CwBvh` tests its input boxes one by one and, like
+    /// [`FlatBvh::point_query`], reports input positions.
+    pub fn cull(&self, mut test: impl FnMut(&Aabb) -> bool, mut f: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        if self.cw.is_some() {
+            for (i, b) in self.boxes.iter().enumerate() {
+                if test(b) {
+                    f(i as u32);
+                }
+            }
+            return;
+        }
+        let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
+        stack.push(0);
+        while let Some(ni) = stack.pop() {
+            let n = &self.nodes[ni as usize];
+            if !test(&Aabb::new(n.min, n.max)) {
+                continue;
+            }
+            if n.count > 0 {
+                for k in n.first..n.first + n.count {
+                    f(self.prims[k as usize]);
+                }
+            } else {
+                stack.push(n.first + 1);
+                stack.push(n.first);
             }
         }
     }

@@ -19,10 +19,12 @@
 
 pub mod aabb;
 pub mod bvh;
+pub mod frustum;
 pub mod gcyl;
 pub mod kernels;
 pub mod mesh;
 pub mod poly;
+pub mod polytope;
 pub mod sweep;
 pub mod table;
 

@@ -526,6 +526,45 @@ impl LeafTable {
         mesh.spans_nearest(m.transform_point3(o), m.transform_vector3(d), tmin, tmax, slack, i, out)
     }
 
+    /// Appends the world planes of leaf `i` when it is a polytope (a half-space:
+    /// one plane; a box under any affine map: six) and says whether it is one.
+    /// For bounds at bake: the planes come from the f32 world-to-local map.
+    pub fn world_planes(&self, i: u32, out: &mut Vec<crate::polytope::Plane>) -> bool {
+        use crate::polytope::Plane;
+        let iu = i as usize;
+        let m = &self.to_local[iu];
+        let a = glam::DMat3::from_cols(
+            m.matrix3.x_axis.as_dvec3(),
+            m.matrix3.y_axis.as_dvec3(),
+            m.matrix3.z_axis.as_dvec3(),
+        );
+        let b = m.translation.as_dvec3();
+        // Local plane dot(nl, x) <= w with x = A p + b: dot(A^T nl, p) <= w - dot(nl, b).
+        let mut push = |nl: DVec3, w: f64| {
+            if let Some(p) = Plane::new(a.transpose() * nl, w - nl.dot(b)) {
+                out.push(p);
+            }
+        };
+        match self.kind[iu] {
+            LeafKind::HalfSpace => {
+                let p0 = self.p0[iu];
+                push(p0.truncate().as_dvec3(), p0.w as f64);
+                true
+            }
+            LeafKind::Cuboid => {
+                let (lo, hi) = (self.p0[iu].truncate().as_dvec3(), self.p1[iu].truncate().as_dvec3());
+                for k in 0..3 {
+                    let mut e = DVec3::ZERO;
+                    e[k] = 1.0;
+                    push(e, hi[k]);
+                    push(-e, -lo[k]);
+                }
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// Is leaf `i` a triangle mesh?
     pub fn is_mesh(&self, i: u32) -> bool {
         self.kind[i as usize] == LeafKind::Mesh

@@ -1,0 +1,301 @@
+//! Programs specialised to a region of rays (a tile of camera rays): a leaf
+//! whose bounds the region misses is empty there, and Roth's rules simplify
+//! what remains. A union drops it; an intersection with it is empty; a
+//! difference drops it as a subtrahend and is empty without its positive
+//! operand. A wide node asks its region tree once per tile: with no child in
+//! the region it is empty, else it stays as baked (its per-ray BVH walk keeps
+//! the order in which children are combined, so no answer changes).
+//!
+//! The specialised nodes are appended to a per-thread copy of the baked
+//! program, so they refer to baked nodes and tables by index and the rays of
+//! the tile evaluate them with the ordinary evaluator ([`Program::eval`]).
+//! Nodes keep their operands' order, so every ray gets exactly the answer of
+//! the whole program: the operands dropped give no span on any ray of the
+//! region.
+
+use rothray_primitives::{frustum::Frustum, polytope::Plane, LeafKind, LeafTable};
+
+use rothray_primitives::bvh::BvhNode;
+
+use crate::program::{NodeKind, Program, Wide};
+
+/// Below this depth nodes are kept as baked (the specialisation recurses).
+const MAX_DEPTH: u32 = 64;
+
+/// A wide difference whose subtrahends the tile meets at most this many of
+/// gets a list of just those (a one-leaf tree), which its rays sort by entry
+/// exactly as they sort what the baked BVH gives them.
+const SHORT_LIST: usize = 16;
+
+/// What the specialisation of one tile did (summed over its objects).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TileCounts {
+    /// Leaves found empty in the tile (each leaf counted where the walk met it;
+    /// a subtree dropped whole counts its node only).
+    pub leaves_pruned: u64,
+    /// Leaves kept.
+    pub leaves_kept: u64,
+    /// Wide nodes asked with the region.
+    pub wide_queries: u64,
+    /// Nodes written (specialised copies).
+    pub nodes_written: u64,
+}
+
+/// A per-thread copy of a baked program with the nodes of the current tile
+/// appended. Reused from tile to tile (no allocation once warm).
+#[derive(Default)]
+pub struct TileProgram {
+    /// The baked program followed by the tile's nodes: what the tile's rays
+    /// evaluate.
+    pub prog: Program,
+    base_nodes: usize,
+    base_children: usize,
+    kids: Vec<u32>,
+    planes: Vec<Plane>,
+    /// Counts since the last [`TileProgram::take_counts`].
+    counts: TileCounts,
+}
+
+impl TileProgram {
+    /// Starts a tile of `base`: forgets the previous tile's nodes (and copies
+    /// `base` when it is not the program copied last).
+    pub fn begin(&mut self, base: &Program) {
+        if self.prog.id != base.id || self.prog.id == 0 {
+            self.prog = base.clone();
+            self.base_nodes = base.kind.len();
+            self.base_children = base.children.len();
+        }
+        let p = &mut self.prog;
+        let n = self.base_nodes;
+        p.kind.truncate(n);
+        p.first.truncate(n);
+        p.count.truncate(n);
+        p.wide.truncate(n);
+        p.bounds.truncate(n);
+        p.leafy.truncate(n);
+        p.children.truncate(self.base_children);
+        p.local_len = 0;
+    }
+
+    /// The counts so far, reset.
+    pub fn take_counts(&mut self) -> TileCounts {
+        std::mem::take(&mut self.counts)
+    }
+
+    /// Node `root` of `base` specialised to the rays of `region`: `None` when
+    /// it is empty for all of them, else the node to evaluate in
+    /// [`TileProgram::prog`] (`root` itself when nothing changed).
+    pub fn specialise(&mut self, base: &Program, leaves: &LeafTable, root: u32, region: &Frustum) -> Option<u32> {
+        debug_assert_eq!(self.prog.id, base.id, "begin() first");
+        let mut s = Spec { base, leaves, region, tp: self };
+        s.node(root, 0)
+    }
+}
+
+struct Spec<'a> {
+    base: &'a Program,
+    leaves: &'a LeafTable,
+    region: &'a Frustum,
+    tp: &'a mut TileProgram,
+}
+
+impl Spec<'_> {
+    fn leaf_touched(&mut self, leaf: u32) -> bool {
+        if self.leaves.kind[leaf as usize] != LeafKind::HalfSpace {
+            return true; // its box was tested
+        }
+        let planes = &mut self.tp.planes;
+        planes.clear();
+        self.leaves.world_planes(leaf, planes);
+        planes.first().is_none_or(|p| self.region.touches_plane(p))
+    }
+
+    fn node(&mut self, n: u32, depth: u32) -> Option<u32> {
+        let b = self.base;
+        let nu = n as usize;
+        let kind = b.kind[nu];
+        if !self.region.touches_box(&b.bounds[nu]) || (kind == NodeKind::Leaf && !self.leaf_touched(b.first[nu])) {
+            self.tp.counts.leaves_pruned += 1;
+            return None;
+        }
+        if kind == NodeKind::Leaf {
+            self.tp.counts.leaves_kept += 1;
+            return Some(n);
+        }
+        if depth >= MAX_DEPTH {
+            return Some(n);
+        }
+        let (first, count) = (b.first[nu] as usize, b.count[nu] as usize);
+        if b.wide[nu] != u32::MAX {
+            return self.wide(n, depth);
+        }
+        let at = self.tp.kids.len();
+        let mut changed = false;
+        for (pos, &c) in b.children[first..first + count].iter().enumerate() {
+            let r = self.node(c, depth + 1);
+            match (kind, r) {
+                // An empty operand of an intersection, or an empty positive
+                // operand of a difference: the node is empty.
+                (NodeKind::Intersection, None) => return self.drop_kids(at),
+                (NodeKind::Difference, None) if pos == 0 => return self.drop_kids(at),
+                (_, None) => changed = true,
+                (_, Some(x)) => {
+                    changed |= x != c;
+                    self.tp.kids.push(x);
+                }
+            }
+        }
+        let k = self.tp.kids.len() - at;
+        let out = match k {
+            0 => None,
+            1 => Some(self.tp.kids[at]),
+            _ if !changed => Some(n),
+            _ => Some(self.write(kind, n, at)),
+        };
+        self.tp.kids.truncate(at);
+        out
+    }
+
+    fn drop_kids(&mut self, at: usize) -> Option<u32> {
+        self.tp.kids.truncate(at);
+        None
+    }
+
+    /// A wide union or difference. A union is empty when the region meets
+    /// none of its children, the child alone when it meets one, else as baked
+    /// (its rays combine children in the BVH's order). A difference is its
+    /// positive operand alone when the region meets no subtrahend, and with a
+    /// short list of the subtrahends met when there are few.
+    fn wide(&mut self, n: u32, depth: u32) -> Option<u32> {
+        let b = self.base;
+        let nu = n as usize;
+        let w = &b.wides[b.wide[nu] as usize];
+        self.tp.counts.wide_queries += 1;
+        let kind = b.kind[nu];
+        let skip = (kind == NodeKind::Difference) as u32;
+        let first = b.first[nu] as usize;
+        // The positions met, up to one past the short list.
+        let at = self.tp.kids.len();
+        let mut many = false;
+        for &p in &w.unbounded {
+            if p >= skip {
+                self.tp.kids.push(p);
+            }
+        }
+        {
+            let region = self.region;
+            let children = &b.children[first..];
+            let bounds = &b.bounds;
+            let kids = std::cell::RefCell::new(&mut self.tp.kids);
+            let limit = at + SHORT_LIST + 1;
+            w.cull.cull(
+                |bx| kids.borrow().len() < limit && region.touches_box(bx),
+                |pos| {
+                    let mut k = kids.borrow_mut();
+                    if k.len() < limit && region.touches_box(&bounds[children[pos as usize] as usize]) {
+                        k.push(pos);
+                    }
+                },
+            );
+            many = many || kids.borrow().len() > at + SHORT_LIST;
+        }
+        let met = self.tp.kids.len() - at;
+        match kind {
+            NodeKind::Difference => {
+                let Some(pos) = self.node(b.children[first], depth + 1) else { return self.drop_kids(at) };
+                if met == 0 {
+                    return self.drop_kids(at).or(Some(pos));
+                }
+                if many {
+                    self.tp.kids.truncate(at);
+                    return Some(n);
+                }
+                Some(self.write_short_difference(n, pos, at))
+            }
+            _ => {
+                if met == 1 && !many {
+                    let c = b.children[first + self.tp.kids[at] as usize];
+                    self.tp.kids.truncate(at);
+                    return self.node(c, depth + 1);
+                }
+                self.tp.kids.truncate(at);
+                (met > 0).then_some(n)
+            }
+        }
+    }
+
+    /// A difference of `positive` minus the subtrahends of baked node `like`
+    /// at the positions `kids[at..]`, with a one-leaf tree listing them in
+    /// position order (its rays collect and sort them by entry, then position,
+    /// as they do from the baked tree).
+    fn write_short_difference(&mut self, like: u32, positive: u32, at: usize) -> u32 {
+        let b = self.base;
+        let first = b.first[like as usize] as usize;
+        let tp = &mut *self.tp;
+        tp.kids[at..].sort_unstable();
+        let p = &mut tp.prog;
+        let cfirst = p.children.len() as u32;
+        p.children.push(positive);
+        if p.local_len == p.local_wides.len() {
+            p.local_wides.push(Wide::default());
+        }
+        let w = &mut p.local_wides[p.local_len];
+        w.unbounded.clear();
+        w.bvh.prims.clear();
+        w.bvh.nodes.clear();
+        w.bvh.cw = None;
+        // As baked: bounded subtrahends in the tree, unbounded ones beside it.
+        let mut bounds = rothray_primitives::Aabb::EMPTY;
+        for (k, &pos) in tp.kids[at..].iter().enumerate() {
+            let c = b.children[first + pos as usize];
+            p.children.push(c);
+            let cb = b.bounds[c as usize];
+            if cb.is_finite() {
+                bounds = bounds.union(&cb);
+                w.bvh.prims.push(k as u32 + 1);
+            } else {
+                w.unbounded.push(k as u32 + 1);
+            }
+        }
+        let count = tp.kids.len() - at;
+        if !w.bvh.prims.is_empty() {
+            w.bvh.nodes.push(BvhNode { min: bounds.min, first: 0, max: bounds.max, count: w.bvh.prims.len() as u32 });
+        }
+        let wide = (p.wides.len() + p.local_len) as u32;
+        p.local_len += 1;
+        tp.kids.truncate(at);
+        let id = p.kind.len() as u32;
+        p.kind.push(NodeKind::Difference);
+        p.first.push(cfirst);
+        p.count.push(count as u32 + 1);
+        p.wide.push(wide);
+        p.bounds.push(p.bounds[positive as usize]);
+        p.leafy.push(false);
+        tp.counts.nodes_written += 1;
+        id
+    }
+
+    /// Writes a node of `kind` over `kids[at..]` (the operands kept, in order).
+    fn write(&mut self, kind: NodeKind, like: u32, at: usize) -> u32 {
+        let tp = &mut *self.tp;
+        let p = &mut tp.prog;
+        let kids = &tp.kids[at..];
+        let first = p.children.len() as u32;
+        p.children.extend_from_slice(kids);
+        let bounds = match kind {
+            NodeKind::Union => kids.iter().fold(rothray_primitives::Aabb::EMPTY, |a, &c| a.union(&p.bounds[c as usize])),
+            NodeKind::Difference => p.bounds[kids[0] as usize],
+            _ => self.base.bounds[like as usize],
+        };
+        let leafy = kids.iter().all(|&c| p.kind[c as usize] == NodeKind::Leaf);
+        let id = p.kind.len() as u32;
+        p.kind.push(kind);
+        p.first.push(first);
+        p.count.push(kids.len() as u32);
+        p.wide.push(u32::MAX);
+        p.bounds.push(bounds);
+        p.leafy.push(leafy);
+        tp.counts.nodes_written += 1;
+        id
+    }
+}

@@ -1,0 +1,123 @@
+//! The tile level of the trace path: for the region of rays of one tile (a
+//! [`Frustum`]), the objects they can meet and each object's program
+//! specialised to the tile ([`TileProgram`]). The rays of the tile evaluate
+//! those programs ([`TileView`]); objects the tile misses, bounded or not, cost
+//! its rays nothing.
+
+use rothray_csg::{Program, TileCounts, TileProgram};
+use rothray_primitives::frustum::Frustum;
+
+use crate::scene::RenderScene;
+
+/// Marks an object the tile's rays cannot meet.
+const NONE: u32 = u32::MAX;
+
+/// Per-thread memory of the tile level, reused from tile to tile.
+#[derive(Default)]
+pub struct TileScratch {
+    tp: TileProgram,
+    /// Per object, its root in `tp.prog` for the current tile, or [`NONE`].
+    root_of: Vec<u32>,
+    /// The objects given a root in the current tile.
+    live: Vec<u32>,
+    /// Program the tables above were made for.
+    program_id: u64,
+    /// Counts since the last [`TileScratch::take_counts`].
+    counts: TileStats,
+}
+
+/// What the tile level did (summed over tiles).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TileStats {
+    /// Tiles prepared.
+    pub tiles: u64,
+    /// Tiles that meet no object (their rays are not traced).
+    pub tiles_culled: u64,
+    /// Objects kept, summed over tiles.
+    pub objects_kept: u64,
+    /// What the specialisation did.
+    pub spec: TileCounts,
+}
+
+impl TileStats {
+    /// Adds `o` to these counts.
+    pub fn add(&mut self, o: &TileStats) {
+        self.tiles += o.tiles;
+        self.tiles_culled += o.tiles_culled;
+        self.objects_kept += o.objects_kept;
+        self.spec.leaves_pruned += o.spec.leaves_pruned;
+        self.spec.leaves_kept += o.spec.leaves_kept;
+        self.spec.wide_queries += o.spec.wide_queries;
+        self.spec.nodes_written += o.spec.nodes_written;
+    }
+}
+
+/// What the rays of one tile evaluate: the tile's program and, per object,
+/// its root there ([`TileView::root`]).
+#[derive(Clone, Copy)]
+pub struct TileView<'a> {
+    /// The baked program followed by the tile's specialised nodes.
+    pub prog: &'a Program,
+    root_of: &'a [u32],
+}
+
+impl TileView<'_> {
+    /// Object `oi`'s root in [`TileView::prog`], or `None` when the tile's rays
+    /// cannot meet it.
+    #[inline(always)]
+    pub fn root(&self, oi: u32) -> Option<u32> {
+        let r = self.root_of[oi as usize];
+        (r != NONE).then_some(r)
+    }
+}
+
+impl TileScratch {
+    /// The view of the tile last prepared.
+    pub fn view(&self) -> TileView<'_> {
+        TileView { prog: &self.tp.prog, root_of: &self.root_of }
+    }
+
+    /// The counts so far, reset.
+    pub fn take_counts(&mut self) -> TileStats {
+        let mut c = std::mem::take(&mut self.counts);
+        c.spec = self.tp.take_counts();
+        c
+    }
+}
+
+impl RenderScene {
+    /// Prepares the tile whose rays all lie in `region`: finds the objects they
+    /// can meet and specialises their programs. Returns whether any object is
+    /// left (when none, no ray of the tile hits anything).
+    pub fn prepare_tile(&self, region: &Frustum, ts: &mut TileScratch) -> bool {
+        ts.tp.begin(&self.program);
+        if ts.program_id != self.program.id || ts.root_of.len() != self.objects.len() {
+            ts.root_of.clear();
+            ts.root_of.resize(self.objects.len(), NONE);
+            ts.live.clear();
+            ts.program_id = self.program.id;
+        }
+        for &oi in &ts.live {
+            ts.root_of[oi as usize] = NONE;
+        }
+        ts.live.clear();
+        let TileScratch { tp, root_of, live, counts, .. } = ts;
+        let mut keep = |oi: u32| {
+            let o = &self.objects[oi as usize];
+            if let Some(r) = tp.specialise(&self.program, &self.leaves, o.root, region) {
+                root_of[oi as usize] = r;
+                live.push(oi);
+            }
+        };
+        for &oi in self.unbounded_objects() {
+            keep(oi);
+        }
+        self.objects_cull().cull(|b| region.touches_box(b), &mut keep);
+        counts.tiles += 1;
+        counts.objects_kept += live.len() as u64;
+        if live.is_empty() {
+            counts.tiles_culled += 1;
+        }
+        !live.is_empty()
+    }
+}

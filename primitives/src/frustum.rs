@@ -1,0 +1,114 @@
+//! The region a bundle of rays sweeps: a pyramid from one apex (a tile of
+//! camera rays) with conservative tests against boxes and half-spaces. Tiles
+//! use it to find the objects, leaves and wide-node children their rays can
+//! meet (see the engine's `tile` module).
+
+use glam::Vec3;
+
+use crate::{aabb::Aabb, polytope::Plane};
+
+/// Every ray `apex + t d`, `t >= 0`, with `d` in the cone spanned by four edge
+/// directions (given in order around the cone).
+#[derive(Clone, Copy, Debug)]
+pub struct Frustum {
+    apex: Vec3,
+    edges: [Vec3; 4],
+    /// Inward normals of the side planes through the apex, then of the plane
+    /// through the apex facing the cone (without it a box behind the apex
+    /// passes each side plane with its own corner); zero when not usable.
+    planes: [Vec3; 5],
+}
+
+impl Frustum {
+    /// The pyramid from `apex` spanned by `edges` (in order around it, either
+    /// way round).
+    pub fn pyramid(apex: Vec3, edges: [Vec3; 4]) -> Frustum {
+        let mid = edges.iter().fold(Vec3::ZERO, |a, e| a + e.normalize_or_zero());
+        let mut planes = [Vec3::ZERO; 5];
+        for i in 0..4 {
+            let n = edges[i].cross(edges[(i + 1) % 4]).normalize_or_zero();
+            planes[i] = if n.dot(mid) < 0.0 { -n } else { n };
+        }
+        // The front plane only when every edge lies in front of it.
+        let f = mid.normalize_or_zero();
+        if edges.iter().all(|e| e.dot(f) > 0.0) {
+            planes[4] = f;
+        }
+        Frustum { apex, edges, planes }
+    }
+
+    /// The apex.
+    pub fn apex(&self) -> Vec3 {
+        self.apex
+    }
+
+    /// Can a ray of the pyramid touch the box? Conservative: a p-vertex test per
+    /// plane with a small relative slack; infinite sides are fine.
+    #[inline]
+    pub fn touches_box(&self, b: &Aabb) -> bool {
+        if b.is_empty() {
+            return false;
+        }
+        for n in self.planes {
+            // The box corner farthest along n.
+            let p = Vec3::select(n.cmpge(Vec3::ZERO), b.max, b.min) - self.apex;
+            // 0 * inf is NaN on an infinite side: the comparison is false and
+            // the plane does not cull, as it must not.
+            let v = n.dot(p);
+            if v < -1e-6 * (1.0 + p.abs().max_element()) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Can a ray of the pyramid reach the half-space `dot(n, p) <= d`? Exact up
+    /// to a small slack: yes when the apex is inside, or some edge heads
+    /// towards the plane (then rays go arbitrarily deep into it).
+    #[inline]
+    pub fn touches_plane(&self, p: &Plane) -> bool {
+        let n = p.n.as_vec3();
+        let a = n.dot(self.apex) as f64;
+        a <= p.d + 1e-6 * (1.0 + p.d.abs() + self.apex.abs().max_element() as f64) || self.edges.iter().any(|e| n.dot(*e) < 0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    /// No point on a ray of the pyramid lies in a box (or half-space) that the
+    /// pyramid is said to miss: 200 000 random points against random boxes.
+    #[test]
+    fn culled_regions_hold_no_point_of_the_pyramid() {
+        let seed = 11u64;
+        println!("seed {seed}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let mut v = |r: &mut SmallRng, s: f32| Vec3::new(r.gen_range(-s..s), r.gen_range(-s..s), r.gen_range(-s..s));
+        let mut culled = 0;
+        for _ in 0..2000 {
+            let apex = v(&mut rng, 3.0);
+            let c = v(&mut rng, 1.0).normalize_or(Vec3::Z);
+            let (u, w) = c.any_orthonormal_pair();
+            let (a, b) = (rng.gen_range(0.01..0.5), rng.gen_range(0.01..0.5));
+            let edges = [c + u * a + w * b, c - u * a + w * b, c - u * a - w * b, c + u * a - w * b];
+            let f = Frustum::pyramid(apex, edges);
+            let ctr = v(&mut rng, 5.0);
+            let h = Vec3::new(rng.gen_range(0.01..1.0), rng.gen_range(0.01..1.0), rng.gen_range(0.01..1.0));
+            let bx = Aabb::new(ctr - h, ctr + h);
+            let pl = Plane::new(v(&mut rng, 1.0).as_dvec3(), rng.gen_range(-3.0..3.0)).unwrap();
+            let (tb, tp) = (f.touches_box(&bx), f.touches_plane(&pl));
+            culled += (!tb) as u32 + (!tp) as u32;
+            for _ in 0..100 {
+                let (s, t) = (rng.gen_range(0.0..1.0f32), rng.gen_range(0.0..1.0f32));
+                let d = (edges[0] * (1.0 - s) + edges[1] * s) * (1.0 - t) + (edges[3] * (1.0 - s) + edges[2] * s) * t;
+                let p = apex + d * rng.gen_range(0.0..20.0);
+                assert!(tb || !bx.contains(p), "box {bx:?} culled but holds {p}");
+                assert!(tp || pl.n.dot(p.as_dvec3()) > pl.d, "plane {pl:?} culled but holds {p}");
+            }
+        }
+        println!("{culled} of 4000 regions culled");
+        assert!(culled > 1000, "the tests cull too little to mean anything: {culled}");
+    }
+}

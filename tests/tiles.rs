@@ -1,0 +1,108 @@
+//! Per-tile programs never change an answer: rays inside a tile's region,
+//! traced with the tile's specialised programs, get exactly (bit for bit) what
+//! the whole program gives them one ray at a time. Random scenes with every
+//! leaf kind, transforms with shear, half-spaces (unbounded objects among
+//! them), meshes, wide unions and differences, rays starting inside, and
+//! tiles that cut through objects.
+
+use glam::DVec3;
+use rand::{rngs::SmallRng, Rng, SeedableRng};
+use rothray::engine::{PacketScratch, Ray, TileScratch};
+use rothray::primitives::frustum::Frustum;
+
+use crate::oracle::*;
+
+/// A wide node (more children than the BVH threshold): a union of small
+/// leaves, or a leaf minus many small leaves.
+fn wide_tree(rng: &mut SmallRng) -> Shape {
+    let n = rng.gen_range(7..24);
+    let small = |rng: &mut SmallRng| {
+        let c = rp(rng, 1.0);
+        let s = match rng.gen_range(0..3) {
+            0 => Shape::Sphere { c, r: rng.gen_range(0.05..0.3) },
+            1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.4)) },
+            _ => random_leaf(rng, true),
+        };
+        if rng.gen_bool(0.3) { random_xf(rng, s) } else { s }
+    };
+    let kids: Vec<Shape> = (0..n).map(|_| small(rng)).collect();
+    if rng.gen_bool(0.5) {
+        Shape::Union(kids)
+    } else {
+        let mut d = vec![random_tree(rng, 1)];
+        d.extend(kids);
+        Shape::Diff(d)
+    }
+}
+
+/// The hit of a ray compared bit for bit, normal included.
+fn key(h: Option<rothray::engine::Hit>) -> Option<(u32, u32, u32, u32, [u32; 3])> {
+    h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub, h.normal.to_array().map(f32::to_bits)))
+}
+
+#[test]
+fn tile_programs_give_every_ray_the_whole_programs_answer() {
+    let (mut rays, mut pruned, mut kept, mut culled, mut tiles, mut hits) = (0u64, 0u64, 0u64, 0u64, 0u64, 0u64);
+    for seed in 0..24u64 {
+        let seed = 0x711e0 + seed;
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..25 {
+            let mut trees = vec![random_tree_with(&mut rng, 3, case % 4 == 0)];
+            for _ in 0..rng.gen_range(0..3) {
+                trees.push(if rng.gen_bool(0.5) { wide_tree(&mut rng) } else { random_tree(&mut rng, 2) });
+            }
+            if rng.gen_bool(0.3) {
+                // A ground plane: an unbounded object.
+                trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.2 });
+            }
+            let scene = bake(&trees);
+            remove_mesh_files(&trees);
+            let mut ps = PacketScratch::default();
+            let mut ts = TileScratch::default();
+            for t in 0..12 {
+                let (o, d) = random_ray(&mut rng);
+                let d = d.normalize();
+                // A tile: a narrow pyramid around d (sometimes wide enough to
+                // cut through several objects).
+                let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
+                let (a, b) = if t % 3 == 0 { (0.3, 0.2) } else { (rng.gen_range(0.002..0.05), rng.gen_range(0.002..0.05)) };
+                let e = [d + u * a + v * b, d - u * a + v * b, d - u * a - v * b, d + u * a - v * b];
+                let region = Frustum::pyramid(o.as_vec3(), e.map(|x| x.as_vec3()));
+                tiles += 1;
+                let any = scene.prepare_tile(&region, &mut ts);
+                culled += (!any) as u64;
+                // Eight rays inside the tile (corners and edges included).
+                let packet: Vec<Ray> = (0..8)
+                    .map(|k| {
+                        let (s, w) = if k < 4 { ((k % 2) as f64, (k / 2) as f64) } else { (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) };
+                        let dir = (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w;
+                        to_ray(o, dir * rng.gen_range(0.5..2.0))
+                    })
+                    .collect();
+                let mut out = [None; 8];
+                if any {
+                    let view = ts.view();
+                    scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
+                }
+                for k in 0..8 {
+                    let one = scene.intersect(&packet[k]);
+                    hits += one.is_some() as u64;
+                    assert_eq!(
+                        key(out[k]),
+                        key(one),
+                        "seed {seed:#x} case {case} tile {t} ray {k}: {:?} trees {:?}",
+                        packet[k],
+                        trees.iter().map(|t| t.json()).collect::<Vec<_>>()
+                    );
+                    rays += 1;
+                }
+            }
+            let c = ts.take_counts();
+            pruned += c.spec.leaves_pruned;
+            kept += c.spec.leaves_kept;
+        }
+    }
+    println!("{rays} rays in {tiles} tiles ({culled} tiles culled), {hits} hits; leaves pruned {pruned}, kept {kept}");
+    // The tiles must prune for the test to mean anything.
+    assert!(culled > 100 && pruned * 8 > kept && hits > rays / 5, "too little pruning or too few hits to test");
+}
