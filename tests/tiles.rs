@@ -2,8 +2,8 @@
 //! traced with the tile's specialised programs, get exactly (bit for bit) what
 //! the whole program gives them one ray at a time. Random scenes with every
 //! leaf kind, transforms with shear, half-spaces (unbounded objects among
-//! them), meshes, wide unions and differences, rays starting inside, and
-//! tiles that cut through objects.
+//! them), meshes, wide unions and differences (with coincident children),
+//! rays starting inside, and tiles that cut through objects.
 
 use glam::DVec3;
 use rand::{rngs::SmallRng, Rng, SeedableRng};
@@ -25,7 +25,20 @@ fn wide_tree(rng: &mut SmallRng) -> Shape {
         };
         if rng.gen_bool(0.3) { random_xf(rng, s) } else { s }
     };
-    let kids: Vec<Shape> = (0..n).map(|_| small(rng)).collect();
+    let mut kids: Vec<Shape> = (0..n).map(|_| small(rng)).collect();
+    // Coincident surfaces: copies of earlier children, and boxes sharing a face.
+    for _ in 0..rng.gen_range(0..4) {
+        let k = rng.gen_range(0..kids.len());
+        let twin = match &kids[k] {
+            Shape::Box { min, max } if rng.gen_bool(0.5) => {
+                let w = max.x - min.x;
+                Shape::Box { min: *min + DVec3::new(w, 0.0, 0.0), max: *max + DVec3::new(w, 0.0, 0.0) }
+            }
+            other => other.clone(),
+        };
+        let at = rng.gen_range(0..=kids.len());
+        kids.insert(at, twin);
+    }
     if rng.gen_bool(0.5) {
         Shape::Union(kids)
     } else {

@@ -111,7 +111,9 @@ fn event(l: &[Span], k: usize) -> (f32, Surf) {
 /// * boundaries of `a` and `b` closer than `eps` are fused into one event at `a`'s
 ///   parameter (so coincident faces of different operands never leave slivers
 ///   or speckle; when both change the result at once, `a`'s surface wins, so the
-///   choice is the same on every pixel);
+///   choice is the same on every pixel; a union takes the boundary of the lower
+///   leaf index, so that its result does not depend on the order of its
+///   operands);
 /// * spans shorter than `eps` are dropped and spans closer than `eps` are merged;
 /// * surfaces of `b` that bound a difference are flipped.
 pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
@@ -161,8 +163,18 @@ pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
             inb = !inb;
             ia += 1;
             ib += 1;
-            t = ta;
-            surf = if sa.is_real() || !sb.is_real() { sa } else { sb };
+            // One surface for both: a's, unless only b's is real. A union
+            // takes the lower leaf index's instead (the earlier operand in
+            // the tree's order), which makes its result independent of the
+            // order operands are combined in: a wide union's BVH walk and a
+            // tile's short list of the same children agree.
+            (t, surf) = if !sa.is_real() && sb.is_real() {
+                (ta, sb)
+            } else if op == Op::Union && sb.is_real() && sb.leaf_index() < sa.leaf_index() {
+                (tb, sb)
+            } else {
+                (ta, sa)
+            };
         } else if a_ok && (!b_ok || ta < tb) {
             ina = !ina;
             ia += 1;

@@ -3,8 +3,10 @@
 //! what remains. A union drops it; an intersection with it is empty; a
 //! difference drops it as a subtrahend and is empty without its positive
 //! operand. A wide node asks its region tree once per tile: with no child in
-//! the region it is empty, else it stays as baked (its per-ray BVH walk keeps
-//! the order in which children are combined, so no answer changes).
+//! the region a union is empty; with few, it becomes a narrow node of those
+//! (a union's result does not depend on the order of its operands, see
+//! `combine`) or a difference with a short list of them; with many it stays
+//! as baked.
 //!
 //! The specialised nodes are appended to a per-thread copy of the baked
 //! program, so they refer to baked nodes and tables by index and the rays of
@@ -22,9 +24,10 @@ use crate::program::{NodeKind, Program, Wide};
 /// Below this depth nodes are kept as baked (the specialisation recurses).
 const MAX_DEPTH: u32 = 64;
 
-/// A wide difference whose subtrahends the tile meets at most this many of
-/// gets a list of just those (a one-leaf tree), which its rays sort by entry
-/// exactly as they sort what the baked BVH gives them.
+/// A wide node whose children (a difference: subtrahends) the tile meets at
+/// most this many of becomes a narrow node of those (a union), or gets a list
+/// of just those (a difference: a one-leaf tree, which its rays sort by entry
+/// exactly as they sort what the baked BVH gives them).
 const SHORT_LIST: usize = 16;
 
 /// What the specialisation of one tile did (summed over its objects).
@@ -161,11 +164,11 @@ impl Spec<'_> {
         None
     }
 
-    /// A wide union or difference. A union is empty when the region meets
-    /// none of its children, the child alone when it meets one, else as baked
-    /// (its rays combine children in the BVH's order). A difference is its
-    /// positive operand alone when the region meets no subtrahend, and with a
-    /// short list of the subtrahends met when there are few.
+    /// A wide union or difference. A union that the region meets few children
+    /// of becomes a narrow union of those (none: empty; one: that child). A
+    /// difference is its positive operand alone when the region meets no
+    /// subtrahend, and gets a short list of the subtrahends met when there are
+    /// few. Either stays as baked when the region meets many.
     fn wide(&mut self, n: u32, depth: u32) -> Option<u32> {
         let b = self.base;
         let nu = n as usize;
@@ -213,13 +216,28 @@ impl Spec<'_> {
                 Some(self.write_short_difference(n, pos, at))
             }
             _ => {
-                if met == 1 && !many {
-                    let c = b.children[first + self.tp.kids[at] as usize];
+                if many {
                     self.tp.kids.truncate(at);
-                    return self.node(c, depth + 1);
+                    return Some(n);
                 }
+                // A narrow union of the children met, in the tree's order
+                // (a union's result does not depend on the order it combines
+                // its operands in: see `combine`).
+                let mut pos: smallvec::SmallVec<[u32; SHORT_LIST + 1]> = self.tp.kids[at..].iter().copied().collect();
                 self.tp.kids.truncate(at);
-                (met > 0).then_some(n)
+                pos.sort_unstable();
+                for p in pos {
+                    if let Some(x) = self.node(b.children[first + p as usize], depth + 1) {
+                        self.tp.kids.push(x);
+                    }
+                }
+                let out = match self.tp.kids.len() - at {
+                    0 => None,
+                    1 => Some(self.tp.kids[at]),
+                    _ => Some(self.write(NodeKind::Union, n, at)),
+                };
+                self.tp.kids.truncate(at);
+                out
             }
         }
     }
