@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The test command of the README: installs what the tests need (POV-Ray 3.7 and
 # python3 for the oracle comparison, Debian's assimp test models for the mesh
-# importer corpus) when they are missing, then runs every test of the workspace.
+# importer corpus) when they are missing, then runs every test of the workspace,
+# then the one-node Slurm test of split rendering (scripts/slurm/test.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -21,3 +22,10 @@ fi
 
 # Release-mode tests: the oracles trace tens of thousands of rays.
 cargo test --workspace --release "$@"
+
+# A real scheduler: a one-node Slurm runs a split render as a job array plus a
+# merge job, compared byte for byte with a single render (needs root; installs
+# slurm-wlm and munge when missing; ROTHRAY_SKIP_SLURM=1 skips it).
+if [ "${ROTHRAY_SKIP_SLURM:-0}" != 1 ]; then
+  scripts/slurm/test.sh
+fi

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use rothray_engine::{render, Aov, RenderScene, RenderSettings};
+use rothray_engine::{render, render_raw, Aov, Part, RenderScene, RenderSettings, Split};
 use rothray_io::{load_scene, SceneFile};
 
 #[derive(Parser)]
@@ -41,13 +41,52 @@ struct ImageArgs {
     spp: u32,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum SplitArg {
+    /// Row of tiles c (8 pixel rows) goes to part c mod N.
+    Interleaved,
+    /// Contiguous bands of rows (worse balanced; kept for comparison).
+    Bands,
+}
+
+/// `--tile I/N`: 0 <= I < N.
+fn parse_tile(s: &str) -> Result<(u32, u32), String> {
+    let (i, n) = s.split_once('/').ok_or_else(|| "expected I/N, such as 0/4 (part I of N, 0 <= I < N)".to_string())?;
+    let i: u32 = i.trim().parse().map_err(|_| format!("I `{i}` is not a whole number (expected I/N, 0 <= I < N)"))?;
+    let n: u32 = n.trim().parse().map_err(|_| format!("N `{n}` is not a whole number (expected I/N, 0 <= I < N)"))?;
+    if n == 0 {
+        return Err("N is 0: there must be at least one part".into());
+    }
+    if i >= n {
+        return Err(format!("I = {i} is not below N = {n} (parts are numbered 0 to {})", n - 1));
+    }
+    Ok((i, n))
+}
+
+/// `--range A..B` (or `A..`, to the end).
+fn parse_range(s: &str) -> Result<(usize, Option<usize>), String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| "expected A..B, such as 0..1000 (rays A to B-1, 0-based)".to_string())?;
+    let a: usize = a.trim().parse().map_err(|_| format!("A `{a}` is not a whole number (expected A..B)"))?;
+    let b: Option<usize> = if b.trim().is_empty() {
+        None
+    } else {
+        Some(b.trim().parse().map_err(|_| format!("B `{b}` is not a whole number (expected A..B)"))?)
+    };
+    if let Some(b) = b {
+        if a > b {
+            return Err(format!("A = {a} is above B = {b}"));
+        }
+    }
+    Ok((a, b))
+}
+
 #[derive(Subcommand)]
 enum Cmd {
-    /// Render a scene to a PNG.
+    /// Render a scene to a PNG (or, with --tile, one part of it for `rothray merge`).
     Render {
         /// Scene file (JSON).
         scene: PathBuf,
-        /// Output PNG.
+        /// Output PNG; with --tile, the part file.
         #[arg(short = 'o', long = "output")]
         output: PathBuf,
         #[command(flatten)]
@@ -55,6 +94,25 @@ enum Cmd {
         /// What to draw.
         #[arg(long, value_enum, default_value = "shaded")]
         aov: AovArg,
+        /// Render only part I of N (0 <= I < N) and write it, unencoded, as a
+        /// part file; `rothray merge` makes the PNG from all N parts. Rows of
+        /// tiles (8 pixel rows) are dealt out in turn (row of tiles c to part c mod N). With Slurm:
+        /// --tile $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
+        #[arg(long, value_name = "I/N", value_parser = parse_tile)]
+        tile: Option<(u32, u32)>,
+        /// How --tile deals rows out to the parts.
+        #[arg(long, value_enum, default_value = "interleaved")]
+        split: SplitArg,
+    },
+    /// Merge the part files of `render --tile I/N` (all N of them, any order)
+    /// into exactly the PNG that `render` without --tile writes.
+    Merge {
+        /// The part files.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Output PNG (replaced only when the merge succeeds).
+        #[arg(short = 'o', long = "output")]
+        output: PathBuf,
     },
     /// Trace the rays of a CSV file; print nearest hits (or all intervals with --all).
     Trace {
@@ -69,6 +127,12 @@ enum Cmd {
         /// Print every interval of every object (Roth diagram) instead of the nearest hit.
         #[arg(long)]
         all: bool,
+        /// Trace only rays A to B-1 (0-based, the header line not counted; `A..`
+        /// runs to the end), numbered as in the whole file: the outputs of
+        /// consecutive ranges, without their header lines, concatenate to the
+        /// whole file's output.
+        #[arg(long, value_name = "A..B", value_parser = parse_range)]
+        range: Option<(usize, Option<usize>)>,
     },
     /// Bake once, render repeatedly, report times.
     Bench {
@@ -85,6 +149,12 @@ enum Cmd {
         /// Print one JSON object as the last line.
         #[arg(long)]
         json: bool,
+        /// Time only part I of N of the image (as `render --tile I/N`).
+        #[arg(long, value_name = "I/N", value_parser = parse_tile)]
+        tile: Option<(u32, u32)>,
+        /// How --tile deals rows out to the parts.
+        #[arg(long, value_enum, default_value = "interleaved")]
+        split: SplitArg,
         /// Run time against error: a comma-separated list of solver tolerances
         /// (swept spheres, generalized cylinders); prints trace time and the
         /// max / RMS error of t against tolerance 1e-12, per tolerance.
@@ -155,7 +225,7 @@ fn settings(sf: &SceneFile, img: ImageArgs, aov: Aov) -> Result<RenderSettings> 
     if spp == 0 || spp > 65536 {
         return Err(BadInput(format!("--spp {spp} is out of range (1..65536)")).into());
     }
-    Ok(RenderSettings { width: w, height: h, spp, aov, background: sf.background, lights: sf.lights.clone(), ambient: 0.1 })
+    Ok(RenderSettings { width: w, height: h, spp, aov, background: sf.background, lights: sf.lights.clone(), ambient: 0.1, part: Part::WHOLE })
 }
 
 /// A progress bar on standard error, shown only once a render has run for a second.
@@ -213,7 +283,7 @@ impl Progress {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
-        Cmd::Render { scene, output, image, aov } => {
+        Cmd::Render { scene, output, image, aov, tile, split } => {
             let (sf, rs, _) = load(&scene)?;
             let aov = match aov {
                 AovArg::Shaded => Aov::Shaded,
@@ -221,7 +291,22 @@ fn run(cli: Cli) -> Result<()> {
                 AovArg::Normal => Aov::Normal,
                 AovArg::Id => Aov::Id,
             };
-            let s = settings(&sf, image, aov)?;
+            let mut s = settings(&sf, image, aov)?;
+            if let Some((index, count)) = tile {
+                s.part = Part { index, count, split: split_of(split) };
+                // The bytes whose hash the part records (read again: the loader
+                // does not keep them).
+                let bytes = std::fs::read(&scene).map_err(|e| BadInput(format!("{}: cannot read: {e}", scene.display())))?;
+                let prog = Progress::start(s.part.rows(s.height as usize, rothray_engine::tile_size().1).len(), "render part");
+                let done = prog.done.clone();
+                let px = render_raw(&rs, &sf.camera, &s, &|d, _| {
+                    done.fetch_max(d, Ordering::Relaxed);
+                });
+                prog.finish();
+                rothray_io::part::write_part(&output, &scene, &bytes, &s, &px)
+                    .with_context(|| format!("cannot write {}", output.display()))?;
+                return Ok(());
+            }
             let prog = Progress::start(s.height as usize, "render");
             let done = prog.done.clone();
             let (img, _) = render(&rs, &sf.camera, &s, &|d, _| {
@@ -232,11 +317,36 @@ fn run(cli: Cli) -> Result<()> {
                 .with_context(|| format!("cannot write {}", output.display()))?;
             Ok(())
         }
-        Cmd::Trace { scene, rays, output, all } => {
+        Cmd::Merge { parts, output } => {
+            let m = rothray_io::part::merge_parts(&parts).map_err(BadInput)?;
+            rothray_io::part::write_atomic(&output, |tmp| {
+                rothray_io::write_png(tmp, m.width, m.height, &m.rgb8).map_err(std::io::Error::other)
+            })
+            .with_context(|| format!("cannot write {}", output.display()))?;
+            Ok(())
+        }
+        Cmd::Trace { scene, rays, output, all, range } => {
             let (_sf, rs, _) = load(&scene)?;
             let text = std::fs::read_to_string(&rays)
                 .map_err(|e| BadInput(format!("{}: cannot read: {e}", rays.display())))?;
             let lines = rothray_io::rays::parse_rays(&text);
+            let (first, end) = match range {
+                None => (0, lines.len()),
+                Some((a, b)) => {
+                    let b = b.unwrap_or(lines.len().max(a));
+                    if b > lines.len() {
+                        return Err(BadInput(format!(
+                            "--range {a}..{b}: {} holds {} rays (numbered 0 to {}), so B can be at most {}",
+                            rays.display(),
+                            lines.len(),
+                            lines.len() as i64 - 1,
+                            lines.len()
+                        ))
+                        .into());
+                    }
+                    (a, b)
+                }
+            };
             let mut out: Box<dyn Write> = match &output {
                 Some(p) => Box::new(std::io::BufWriter::new(
                     std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
@@ -249,7 +359,7 @@ fn run(cli: Cli) -> Result<()> {
             } else {
                 writeln!(out, "ray,hit,t,nx,ny,nz,object,leaf")?;
             }
-            for (i, l) in lines.iter().enumerate() {
+            for (i, l) in lines.iter().enumerate().take(end).skip(first) {
                 let ray = match &l.ray {
                     Ok(r) => r,
                     Err(msg) => {
@@ -282,7 +392,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             out.flush()?;
             if bad > 0 {
-                eprintln!("{bad} of {} rays were unusable and skipped", lines.len());
+                eprintln!("{bad} of {} rays were unusable and skipped", end - first);
             }
             Ok(())
         }
@@ -290,21 +400,26 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Bench { scene, image, repeats, json, tolerances, plot, .. } if !tolerances.is_empty() => {
             bench_tolerances(&scene, image, repeats, &tolerances, plot.as_deref(), json)
         }
-        Cmd::Bench { scene, image, repeats, json, no_shadows, .. } => {
+        Cmd::Bench { scene, image, repeats, json, no_shadows, tile, split, .. } => {
             let (sf, rs, bake) = load(&scene)?;
             let mut s = settings(&sf, image, Aov::Shaded)?;
+            if let Some((index, count)) = tile {
+                s.part = Part { index, count, split: split_of(split) };
+            }
             if no_shadows {
                 s.lights.clear();
                 s.ambient = 1.0;
             }
             let mut times = Vec::new();
+            let mut cpu = Vec::new();
             let mut stats = Default::default();
             // One warm-up render (page faults, thread pool start), then the timed ones.
             let _ = render(&rs, &sf.camera, &s, &|_, _| {});
             for _ in 0..repeats.max(1) {
-                let t = Instant::now();
+                let (t, c) = (Instant::now(), process_cpu_s());
                 let (_, st) = render(&rs, &sf.camera, &s, &|_, _| {});
                 times.push(t.elapsed().as_secs_f64());
+                cpu.push(process_cpu_s() - c);
                 stats = st;
             }
             times.sort_by(f64::total_cmp);
@@ -324,6 +439,8 @@ fn run(cli: Cli) -> Result<()> {
                     "height": s.height,
                     "spp": s.spp,
                     "threads": rayon::current_num_threads(),
+                    "tile": [s.part.index, s.part.count],
+                    "split": s.part.split.name(),
                     "shadows": !no_shadows,
                     "rays": rays,
                     "camera_rays": stats.primary_rays,
@@ -331,6 +448,7 @@ fn run(cli: Cli) -> Result<()> {
                     "bake_s": bake.as_secs_f64(),
                     "trace_s_median": med,
                     "trace_s_all": times,
+                    "trace_cpu_s_all": cpu,
                     "mrays_per_s": rays as f64 / med / 1e6,
                     "counters": bench_counters(&stats, rays),
                 });
@@ -338,6 +456,25 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+    }
+}
+
+/// CPU time of the whole process (all threads), seconds: unlike wall time it
+/// does not count the time other processes hold the cores (`bench --json`'s
+/// `trace_cpu_s_all`, used by scripts/split-balance.sh on shared machines).
+fn process_cpu_s() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes one timespec through a valid pointer.
+    if unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) } != 0 {
+        return f64::NAN;
+    }
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}
+
+fn split_of(s: SplitArg) -> Split {
+    match s {
+        SplitArg::Interleaved => Split::Interleaved,
+        SplitArg::Bands => Split::Bands,
     }
 }
 

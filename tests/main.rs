@@ -11,4 +11,5 @@ mod leaf_oracle;
 mod oracle;
 mod povray;
 mod render_flat;
+mod split;
 mod tiles;

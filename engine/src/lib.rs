@@ -27,12 +27,14 @@
 #![warn(missing_docs)]
 
 pub mod components;
+pub mod part;
 pub mod render;
 pub mod scene;
 pub mod tile;
 
 pub use components::*;
-pub use render::{encode_srgb, leaf_id_color, render, Aov, Camera, CameraRays, Light, RenderSettings, RenderStats};
+pub use part::{Part, Split};
+pub use render::{encode_depth, encode_pixel, encode_srgb, leaf_id_color, render, render_raw, tile_size, Aov, RawPixels, Camera, CameraRays, Light, RenderSettings, RenderStats};
 pub use tile::{TileScratch, TileStats, TileView};
 pub use scene::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError, Hit, LeafInfo, ObjectInfo, PacketScratch, Ray, RenderScene};
 pub use glam;

@@ -6,6 +6,7 @@ use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 use rothray_csg::{take_eval_counts, EvalCounts, Scratch};
 
+use crate::part::Part;
 use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
 use crate::tile::{TileScratch, TileStats};
 use rothray_primitives::frustum::Frustum;
@@ -128,6 +129,8 @@ pub struct RenderSettings {
     pub lights: Vec<Light>,
     /// Ambient term.
     pub ambient: f32,
+    /// Which rows to render ([`Part::WHOLE`]: all of them); see [`render_raw`].
+    pub part: Part,
 }
 
 /// The flat colour of leaf `i` in the `id` AOV (shared with `tools/scene2pov.py`):
@@ -156,6 +159,51 @@ pub fn encode_srgb(c: Vec3) -> [u8; 3] {
     let lut = srgb_table();
     let q = |x: f32| lut[(x.clamp(0.0, 1.0) * 4095.0 + 0.5) as usize];
     [q(c.x), q(c.y), q(c.z)]
+}
+
+/// The 8-bit pixel of a colour of `aov` other than depth, as `render` writes
+/// it (sRGB for the shaded picture, linear for normal and id).
+pub fn encode_pixel(aov: Aov, c: Vec3) -> [u8; 3] {
+    match aov {
+        Aov::Shaded => encode_srgb(c),
+        _ => {
+            let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+            [q(c.x), q(c.y), q(c.z)]
+        }
+    }
+}
+
+/// The depth picture: grey from each pixel's distance, scaled to the finite
+/// range of the whole image (white near, black far and for no surface).
+pub fn encode_depth(depth: &[f32], out: &mut [u8]) {
+    let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
+    for &d in depth {
+        if d.is_finite() {
+            lo = lo.min(d);
+            hi = hi.max(d);
+        }
+    }
+    let span = (hi - lo).max(1e-6);
+    for (i, &d) in depth.iter().enumerate() {
+        let g = if d.is_finite() { (255.0 * (1.0 - 0.85 * (d - lo) / span)) as u8 } else { 0 };
+        out[i * 3..i * 3 + 3].copy_from_slice(&[g, g, g]);
+    }
+}
+
+/// The pixels of one part before they are encoded ([`render_raw`]).
+#[derive(Clone, Debug, Default)]
+pub struct RawPixels {
+    /// The image rows held, increasing ([`Part::rows`]).
+    pub rows: Vec<usize>,
+    /// The tile size (width, height) it was rendered with ([`tile_size`]):
+    /// a part holds whole rows of tiles.
+    pub tile: (usize, usize),
+    /// Linear colour per pixel of those rows, row by row (empty for depth).
+    pub rgb: Vec<Vec3>,
+    /// Distance per pixel (infinite: no surface); only for the depth picture.
+    pub depth: Vec<f32>,
+    /// Counters.
+    pub stats: RenderStats,
 }
 
 /// Counters of a render.
@@ -235,7 +283,9 @@ fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, s
 /// 209, 215, 472; 64x32 1508, 213, 236, 512.
 const TILE: (usize, usize) = (16, 8);
 
-fn tile_size() -> (usize, usize) {
+/// The tile size in use (width, height): 16x8, or `ROTHRAY_TILE=WxH` (for measurements).
+/// Split renders deal out whole rows of tiles (see [`Part`]).
+pub fn tile_size() -> (usize, usize) {
     let parse = |v: String| -> Option<(usize, usize)> {
         let (a, b) = v.split_once('x')?;
         let (w, h): (usize, usize) = (a.parse().ok()?, b.parse().ok()?);
@@ -263,8 +313,34 @@ impl CameraRays {
 
 /// Renders into an RGB8 buffer (`width * height * 3`, rows top to bottom).
 /// `progress(done_rows, total_rows)` is called as rows finish (from any thread).
+/// With `s.part` other than [`Part::WHOLE`] the buffer holds only that part's
+/// rows (and the depth picture is left unencoded: its scale needs the whole image).
 pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &(dyn Fn(usize, usize) + Sync)) -> (Vec<u8>, RenderStats) {
-    let (w, h) = (s.width as usize, s.height as usize);
+    let (out, _, _, stats) = render_impl(scene, cam, s, progress, false);
+    (out, stats)
+}
+
+/// The rows of `s.part` before encoding: what `rothray render --tile` keeps.
+/// Encoding them with [`encode_pixel`] / [`encode_depth`] gives, bit for bit,
+/// the bytes of [`render`] (same chunks, packets and jitter).
+pub fn render_raw(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &(dyn Fn(usize, usize) + Sync)) -> RawPixels {
+    let (_, rgb, depth, stats) = render_impl(scene, cam, s, progress, true);
+    let tile = tile_size();
+    RawPixels { rows: s.part.rows(s.height as usize, tile.1), tile, rgb, depth, stats }
+}
+
+fn render_impl(
+    scene: &RenderScene,
+    cam: &Camera,
+    s: &RenderSettings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    raw: bool,
+) -> (Vec<u8>, Vec<Vec3>, Vec<f32>, RenderStats) {
+    let w = s.width as usize;
+    let (tile_w, rows) = tile_size();
+    // Only the part's chunks (rows of tiles) are rendered, into buffers of the part's rows.
+    let chunk_ids = s.part.chunks(s.height as usize, rows);
+    let h = s.part.rows(s.height as usize, rows).len();
     let rays = cam.rays(s.width, s.height);
     let spp = s.spp.max(1);
     // Pixels go straight into the 8-bit image: no float frame buffer (allocating
@@ -275,24 +351,17 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     let want_depth = s.aov == Aov::Depth;
     let mut depth = if want_depth { vec![f32::INFINITY; w * h] } else { Vec::new() };
     let done = AtomicUsize::new(0);
-    let (tile_w, rows) = tile_size();
     let shadow_total = AtomicUsize::new(0);
     let tile_total = std::sync::Mutex::new((TileStats::default(), EvalCounts::default()));
     let _ = take_eval_counts(); // this thread's earlier queries are not the render's
     let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
-    let encode = |c: Vec3| -> [u8; 3] {
-        match s.aov {
-            Aov::Shaded => encode_srgb(c),
-            _ => {
-                let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
-                [q(c.x), q(c.y), q(c.z)]
-            }
-        }
-    };
+    let encode = |c: Vec3| encode_pixel(s.aov, c);
     let bg8 = encode(bg);
+    // Raw output: linear colours, background until written (as `bg8` is).
+    let mut lin = if raw && !want_depth { vec![bg; w * h] } else { Vec::new() };
     // Flat shading (no lights, one sample): a hit's pixel depends only on its
     // leaf, encoded once here exactly as `shade` and the loop below would.
-    let flat: Option<Vec<[u8; 3]>> = (s.aov == Aov::Shaded && s.lights.is_empty() && spp == 1)
+    let flat: Option<Vec<[u8; 3]>> = (s.aov == Aov::Shaded && s.lights.is_empty() && spp == 1 && !raw)
         .then(|| scene.leaf_info.iter().map(|li| encode(Vec3::ZERO + li.color * Vec3::splat(s.ambient))).collect());
     // Only lights and the normal picture read a hit's normal.
     let normals = s.aov == Aov::Normal || (s.aov == Aov::Shaded && !s.lights.is_empty());
@@ -302,10 +371,12 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
     let nchunks = h.div_ceil(rows);
     let mut dchunks: Vec<Option<&mut [f32]>> =
         if want_depth { depth.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
-    out.par_chunks_mut(w * rows * 3).zip(dchunks.par_iter_mut()).enumerate().for_each_init(
+    let mut lchunks: Vec<Option<&mut [Vec3]>> = if !lin.is_empty() { lin.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
+    out.par_chunks_mut(w * rows * 3).zip(dchunks.par_iter_mut().zip(lchunks.par_iter_mut())).enumerate().for_each_init(
         || (PacketScratch::default(), TileScratch::default()),
-        |(ps, ts), (chunk, (orows, drows))| {
+        |(ps, ts), (ci, (orows, (drows, lrows)))| {
             let mut shadows = 0u64;
+            let chunk = chunk_ids[ci];
             let y0 = chunk * rows;
             let rows_here = orows.len() / (3 * w);
             for x0 in (0..w).step_by(tile_w) {
@@ -398,6 +469,9 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
                             if let Some(d) = drows.as_deref_mut() {
                                 d[i] = dmin[k];
                             }
+                            if let Some(l) = lrows.as_deref_mut() {
+                                l[i] = c;
+                            }
                         }
                     }
                 }
@@ -411,19 +485,9 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
         },
     );
     drop(dchunks);
-    if want_depth {
-        let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
-        for &d in &depth {
-            if d.is_finite() {
-                lo = lo.min(d);
-                hi = hi.max(d);
-            }
-        }
-        let span = (hi - lo).max(1e-6);
-        for (i, &d) in depth.iter().enumerate() {
-            let g = if d.is_finite() { (255.0 * (1.0 - 0.85 * (d - lo) / span)) as u8 } else { 0 };
-            out[i * 3..i * 3 + 3].copy_from_slice(&[g, g, g]);
-        }
+    drop(lchunks);
+    if want_depth && !raw && s.part.count <= 1 {
+        encode_depth(&depth, &mut out);
     }
     let (tiles, eval) = tile_total.into_inner().expect("tile counts");
     let stats = RenderStats {
@@ -432,7 +496,7 @@ pub fn render(scene: &RenderScene, cam: &Camera, s: &RenderSettings, progress: &
         tiles,
         eval,
     };
-    (out, stats)
+    (out, lin, depth, stats)
 }
 
 #[cfg(test)]

@@ -4,10 +4,12 @@
 //!   located by JSON path (`objects[2].shape.difference[1].sphere.radius`);
 //! * [`mesh`]: OBJ (tobj) and glTF 2.0 (.gltf / .glb) import of closed meshes;
 //! * [`rays`]: the `rothray trace` ray CSV;
+//! * [`part`]: part files of a split render and their merge;
 //! * [`write_png`]: images.
 #![warn(missing_docs)]
 
 pub mod mesh;
+pub mod part;
 pub mod rays;
 pub mod scene;
 
