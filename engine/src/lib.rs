@@ -29,6 +29,7 @@
 pub mod components;
 pub mod part;
 pub mod render;
+mod render_tile;
 pub mod scene;
 pub mod tile;
 

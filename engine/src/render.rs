@@ -7,8 +7,9 @@ use rayon::prelude::*;
 use rothray_csg::{take_eval_counts, EvalCounts, Scratch};
 
 use crate::part::Part;
-use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
-use crate::tile::{TileScratch, TileStats};
+use crate::scene::{Hit, Ray, RenderScene};
+use crate::render_tile::{render_tile, Frame, Rows, Worker};
+use crate::tile::TileStats;
 use rothray_primitives::frustum::Frustum;
 
 /// Pinhole camera of the scene format.
@@ -220,7 +221,7 @@ pub struct RenderStats {
 }
 
 #[inline]
-fn hash2(a: u32, b: u32) -> u32 {
+pub(crate) fn hash2(a: u32, b: u32) -> u32 {
     let mut h = a.wrapping_mul(0x9E37_79B1) ^ b.wrapping_mul(0x85EB_CA77);
     h ^= h >> 15;
     h = h.wrapping_mul(0x2C1B_3C6D);
@@ -229,12 +230,12 @@ fn hash2(a: u32, b: u32) -> u32 {
     h ^ (h >> 15)
 }
 
-struct Sample {
-    rgb: Vec3,
-    depth: f32,
+pub(crate) struct Sample {
+    pub rgb: Vec3,
+    pub depth: f32,
 }
 
-fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, scratch: &mut Scratch, shadows: &mut u64) -> Sample {
+pub(crate) fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, scratch: &mut Scratch, shadows: &mut u64) -> Sample {
     let Some(h) = hit else {
         // AOVs keep black for "no surface" so they can be read back (leaf ids, normals).
         let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
@@ -305,7 +306,7 @@ impl CameraRays {
 
     /// The region of every ray through the pixels `[x0, x1) x [y0, y1)`
     /// (jittered samples included).
-    fn tile_region(&self, x0: usize, x1: usize, y0: usize, y1: usize) -> Frustum {
+    pub(crate) fn tile_region(&self, x0: usize, x1: usize, y0: usize, y1: usize) -> Frustum {
         let (x0, x1, y0, y1) = (x0 as f32, x1 as f32, y0 as f32, y1 as f32);
         Frustum::pyramid(self.eye, [self.dir(x0, y0), self.dir(x1, y0), self.dir(x1, y1), self.dir(x0, y1)])
     }
@@ -372,113 +373,19 @@ fn render_impl(
     let mut dchunks: Vec<Option<&mut [f32]>> =
         if want_depth { depth.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
     let mut lchunks: Vec<Option<&mut [Vec3]>> = if !lin.is_empty() { lin.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
+    let frame = Frame { scene, s, rays, spp, w, flat, normals, bg8 };
     out.par_chunks_mut(w * rows * 3).zip(dchunks.par_iter_mut().zip(lchunks.par_iter_mut())).enumerate().for_each_init(
-        || (PacketScratch::default(), TileScratch::default()),
-        |(ps, ts), (ci, (orows, (drows, lrows)))| {
-            let mut shadows = 0u64;
-            let chunk = chunk_ids[ci];
-            let y0 = chunk * rows;
+        || (Worker::default(), Vec::new()),
+        |(wk, blocks), (ci, (orows, (drows, lrows)))| {
             let rows_here = orows.len() / (3 * w);
+            let mut part = Rows { y0: chunk_ids[ci] * rows, rows: rows_here, out: orows, depth: drows.as_deref_mut(), lin: lrows.as_deref_mut() };
             for x0 in (0..w).step_by(tile_w) {
-                let x1 = (x0 + tile_w).min(w);
-                if !scene.prepare_tile(&rays.tile_region(x0, x1, y0, y0 + rows_here), ts) {
-                    if bg8 != [0; 3] {
-                        for r in 0..rows_here {
-                            for px in orows[3 * (r * w + x0)..3 * (r * w + x1)].chunks_exact_mut(3) {
-                                px.copy_from_slice(&bg8);
-                            }
-                        }
-                    }
-                    continue;
-                }
-                // Blocks of 4x2 pixels: their camera rays go as one packet.
-                for r0 in (0..rows_here).step_by(2) {
-                    for bx in (x0..x1).step_by(4) {
-                        let (bw, bh) = ((x1 - bx).min(4), (rows_here - r0).min(2));
-                        let np = bw * bh;
-                        let px: [(usize, usize); 8] = std::array::from_fn(|k| (r0 + k / 4, bx + k % 4));
-                        let px = if np == 8 {
-                            px
-                        } else {
-                            std::array::from_fn(|k| if k < np { (r0 + k / bw, bx + k % bw) } else { (0, 0) })
-                        };
-                        let px = &px[..np];
-                        let mut acc = [Vec3::ZERO; 8];
-                        let mut dmin = [f32::INFINITY; 8];
-                        let (mut all_bg, mut flat_done) = (false, false);
-                        for si in 0..spp {
-                            // Made by `ray8`, four at a time, not filled one by one
-                            // into a template array (reading back the template's
-                            // piecewise stores stalled on store forwarding). Lanes
-                            // past `np` repeat the last pixel.
-                            let mut fx = [0.0f32; 8];
-                            let mut fy = [0.0f32; 8];
-                            for k in 0..8 {
-                                let (r, x) = px[k.min(np - 1)];
-                                let y = y0 + r;
-                                let (jx, jy) = if spp == 1 {
-                                    (0.5, 0.5)
-                                } else {
-                                    let rr = hash2((y * w + x) as u32, si);
-                                    ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
-                                };
-                                (fx[k], fy[k]) = (x as f32 + jx, y as f32 + jy);
-                            }
-                            let rs = rays.ray8(&fx, &fy);
-                            let rs = &rs[..np];
-                            let mut hits = [None; 8];
-                            scene.intersect_packet_with(rs, ps, &mut hits, normals, Some(&ts.view()));
-                            if spp == 1 && hits.iter().all(Option::is_none) {
-                                // Background only (most packets of a frame): the
-                                // pixels are `bg8`, the depths stay infinite.
-                                all_bg = true;
-                                break;
-                            }
-                            if let Some(flat) = &flat {
-                                for (k, &(r, x)) in px.iter().enumerate() {
-                                    let i = r * w + x;
-                                    let c = hits[k].map_or(bg8, |h| flat[h.leaf as usize]);
-                                    orows[3 * i..3 * i + 3].copy_from_slice(&c);
-                                }
-                                flat_done = true;
-                                break;
-                            }
-                            for k in 0..rs.len() {
-                                let smp = shade(scene, s, &rs[k], hits[k], &mut ps.scratch, &mut shadows);
-                                acc[k] += smp.rgb;
-                                dmin[k] = dmin[k].min(smp.depth);
-                            }
-                        }
-                        if flat_done {
-                            continue;
-                        }
-                        if all_bg {
-                            if bg8 != [0; 3] {
-                                for &(r, x) in px {
-                                    let i = r * w + x;
-                                    orows[3 * i..3 * i + 3].copy_from_slice(&bg8);
-                                }
-                            }
-                            continue;
-                        }
-                        for (k, &(r, x)) in px.iter().enumerate() {
-                            let i = r * w + x;
-                            // (x / 1 is x: one sample skips the division.)
-                            let c = if spp == 1 { acc[k] } else { acc[k] / spp as f32 };
-                            orows[3 * i..3 * i + 3].copy_from_slice(&encode(c));
-                            if let Some(d) = drows.as_deref_mut() {
-                                d[i] = dmin[k];
-                            }
-                            if let Some(l) = lrows.as_deref_mut() {
-                                l[i] = c;
-                            }
-                        }
-                    }
-                }
+                render_tile(&frame, wk, &mut part, x0, (x0 + tile_w).min(w), blocks);
             }
-            shadow_total.fetch_add(shadows as usize, Ordering::Relaxed);
+            shadow_total.fetch_add(std::mem::take(&mut wk.shadows) as usize, Ordering::Relaxed);
             let mut tot = tile_total.lock().expect("tile counts");
-            tot.0.add(&ts.take_counts());
+            tot.0.add(&wk.ts.take_counts());
+            tot.0.add(&wk.shadow_ts.take_counts());
             tot.1.add(&take_eval_counts());
             let d = done.fetch_add(rows_here, Ordering::Relaxed) + rows_here;
             progress(d, h);

@@ -1,0 +1,233 @@
+//! One tile of a picture: its camera rays in packets of eight through the
+//! tile's programs, then, per light, the shadow rays of its hits as one bundle
+//! through programs specialised to their own region (the box of their origins
+//! swept towards the light), then the pixels.
+
+use glam::Vec3;
+
+use crate::render::{hash2, shade, Aov, CameraRays, RenderSettings};
+use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
+use crate::tile::TileScratch;
+use rothray_primitives::{frustum::Frustum, Aabb};
+
+/// What every tile of a frame shares.
+pub(crate) struct Frame<'a> {
+    pub scene: &'a RenderScene,
+    pub s: &'a RenderSettings,
+    pub rays: CameraRays,
+    pub spp: u32,
+    /// Image width (pixels).
+    pub w: usize,
+    /// Flat pictures: the pixel of each leaf (see `render_impl`).
+    pub flat: Option<Vec<[u8; 3]>>,
+    /// Do the hits need normals?
+    pub normals: bool,
+    pub bg8: [u8; 3],
+}
+
+/// The rows of the picture one job writes (`rows` rows from image row `y0`).
+pub(crate) struct Rows<'a> {
+    pub y0: usize,
+    pub rows: usize,
+    pub out: &'a mut [u8],
+    pub depth: Option<&'a mut [f32]>,
+    pub lin: Option<&'a mut [Vec3]>,
+}
+
+/// Per-thread memory of the renderer, reused from tile to tile.
+#[derive(Default)]
+pub(crate) struct Worker {
+    pub ps: PacketScratch,
+    pub ts: TileScratch,
+    /// The tile level of the shadow bundles.
+    pub shadow_ts: TileScratch,
+    pub shadows: u64,
+    /// Per pixel of the tile (in packet order): its place, ray, hit, sums.
+    px: Vec<(usize, usize)>,
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    acc: Vec<Vec3>,
+    dmin: Vec<f32>,
+    /// Lit shading: base colour, light sum, shadow origin and facing normal per pixel.
+    base: Vec<Vec3>,
+    light: Vec<Vec3>,
+    origin: Vec<Vec3>,
+    facing: Vec<Vec3>,
+}
+
+impl Worker {
+    /// Lays out the pixels of the tile `[x0, x1)` x rows `[0, rows)` in blocks
+    /// of 4x2 (a packet each); returns the blocks' `(start, len)`.
+    fn layout(&mut self, x0: usize, x1: usize, rows: usize, blocks: &mut Vec<(usize, usize)>) {
+        self.px.clear();
+        blocks.clear();
+        for r0 in (0..rows).step_by(2) {
+            for bx in (x0..x1).step_by(4) {
+                let (bw, bh) = ((x1 - bx).min(4), (rows - r0).min(2));
+                blocks.push((self.px.len(), bw * bh));
+                for k in 0..bw * bh {
+                    self.px.push((r0 + k / bw, bx + k % bw));
+                }
+            }
+        }
+        let n = self.px.len();
+        self.acc.clear();
+        self.acc.resize(n, Vec3::ZERO);
+        self.dmin.clear();
+        self.dmin.resize(n, f32::INFINITY);
+        self.rays.resize(n, Ray::new(Vec3::ZERO, Vec3::Z));
+        self.hits.resize(n, None);
+    }
+}
+
+/// Renders the tile of columns `[x0, x1)` of `rows` into its pixels.
+pub(crate) fn render_tile(f: &Frame, wk: &mut Worker, rows: &mut Rows, x0: usize, x1: usize, blocks: &mut Vec<(usize, usize)>) {
+    let (w, scene, s) = (f.w, f.scene, f.s);
+    let (y0, nrows) = (rows.y0, rows.rows);
+    if !scene.prepare_tile(&f.rays.tile_region(x0, x1, y0, y0 + nrows), &mut wk.ts) {
+        fill_background(f, rows, x0, x1);
+        return;
+    }
+    wk.layout(x0, x1, nrows, blocks);
+    let lit = s.aov == Aov::Shaded && !s.lights.is_empty();
+    for si in 0..f.spp {
+        camera_rays(f, wk, y0, si, blocks);
+        if f.spp == 1 && wk.hits.iter().all(Option::is_none) {
+            // Background only: the pixels are `bg8`, the depths stay infinite.
+            fill_background(f, rows, x0, x1);
+            return;
+        }
+        if let Some(flat) = &f.flat {
+            for (k, &(r, x)) in wk.px.iter().enumerate() {
+                let i = r * w + x;
+                let c = wk.hits[k].map_or(f.bg8, |h| flat[h.leaf as usize]);
+                rows.out[3 * i..3 * i + 3].copy_from_slice(&c);
+            }
+            return;
+        }
+        if lit {
+            shade_lit(f, wk);
+        } else {
+            for k in 0..wk.px.len() {
+                let smp = shade(scene, s, &wk.rays[k], wk.hits[k], &mut wk.ps.scratch, &mut wk.shadows);
+                wk.acc[k] += smp.rgb;
+                wk.dmin[k] = wk.dmin[k].min(smp.depth);
+            }
+        }
+    }
+    let encode = |c: Vec3| crate::render::encode_pixel(s.aov, c);
+    for (k, &(r, x)) in wk.px.iter().enumerate() {
+        let i = r * w + x;
+        // (x / 1 is x: one sample skips the division.)
+        let c = if f.spp == 1 { wk.acc[k] } else { wk.acc[k] / f.spp as f32 };
+        rows.out[3 * i..3 * i + 3].copy_from_slice(&encode(c));
+        if let Some(d) = rows.depth.as_deref_mut() {
+            d[i] = wk.dmin[k];
+        }
+        if let Some(l) = rows.lin.as_deref_mut() {
+            l[i] = c;
+        }
+    }
+}
+
+fn fill_background(f: &Frame, rows: &mut Rows, x0: usize, x1: usize) {
+    if f.bg8 != [0; 3] {
+        for r in 0..rows.rows {
+            for px in rows.out[3 * (r * f.w + x0)..3 * (r * f.w + x1)].chunks_exact_mut(3) {
+                px.copy_from_slice(&f.bg8);
+            }
+        }
+    }
+}
+
+/// Sample `si` of every pixel of the tile: camera rays in packets, hits.
+fn camera_rays(f: &Frame, wk: &mut Worker, y0: usize, si: u32, blocks: &[(usize, usize)]) {
+    let view = wk.ts.view();
+    for &(start, np) in blocks {
+        // Made by `ray8`, four at a time (filling a template array one by one
+        // and reading it back stalled on store forwarding). Lanes past `np`
+        // repeat the last pixel.
+        let mut fx = [0.0f32; 8];
+        let mut fy = [0.0f32; 8];
+        for k in 0..8 {
+            let (r, x) = wk.px[start + k.min(np - 1)];
+            let y = y0 + r;
+            let (jx, jy) = if f.spp == 1 {
+                (0.5, 0.5)
+            } else {
+                let rr = hash2((y * f.w + x) as u32, si);
+                ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
+            };
+            (fx[k], fy[k]) = (x as f32 + jx, y as f32 + jy);
+        }
+        let rs = f.rays.ray8(&fx, &fy);
+        let mut hits = [None; 8];
+        f.scene.intersect_packet_with(&rs[..np], &mut wk.ps, &mut hits, f.normals, Some(&view));
+        wk.rays[start..start + np].copy_from_slice(&rs[..np]);
+        wk.hits[start..start + np].copy_from_slice(&hits[..np]);
+    }
+}
+
+/// The shaded picture with lights: what `shade` computes per hit, with the
+/// shadow rays of each light traced as one bundle through programs
+/// specialised to their region (same operations in the same order, so the
+/// same pixels).
+fn shade_lit(f: &Frame, wk: &mut Worker) {
+    let (scene, s) = (f.scene, f.s);
+    let n = wk.px.len();
+    wk.base.clear();
+    wk.light.clear();
+    wk.origin.clear();
+    wk.facing.clear();
+    for k in 0..n {
+        let ray = &wk.rays[k];
+        let (base, origin, facing) = match wk.hits[k] {
+            None => (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO),
+            Some(h) => {
+                // Face the viewer (a ray that starts inside a solid sees its inner side).
+                let nf = if h.normal.dot(ray.dir) > 0.0 { -h.normal } else { h.normal };
+                let p = ray.origin + ray.dir * h.t;
+                let off = (scene.eps * 20.0).max(1e-4 * (1.0 + p.abs().max_element()));
+                (scene.leaf_info[h.leaf as usize].color, p + nf * off, nf)
+            }
+        };
+        wk.base.push(base);
+        wk.light.push(Vec3::splat(s.ambient));
+        wk.origin.push(origin);
+        wk.facing.push(facing);
+    }
+    for l in &s.lights {
+        let to_l = -l.direction.normalize_or_zero();
+        // The shadow rays of this light: hits whose surface faces it.
+        let mut region = Aabb::EMPTY;
+        for k in 0..n {
+            if wk.hits[k].is_some() && wk.facing[k].dot(to_l) > 0.0 {
+                region.grow(wk.origin[k]);
+            }
+        }
+        if region.is_empty() {
+            continue;
+        }
+        let any = scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts);
+        let view = wk.shadow_ts.view();
+        for k in 0..n {
+            let c = wk.facing[k].dot(to_l);
+            if wk.hits[k].is_none() || c <= 0.0 {
+                continue;
+            }
+            wk.shadows += 1;
+            let sr = Ray { origin: wk.origin[k], dir: to_l, tmin: 0.0, tmax: f32::INFINITY };
+            if !any || !scene.occluded_in(&sr, &mut wk.ps.scratch, Some(&view)) {
+                wk.light[k] += l.color * c;
+            }
+        }
+    }
+    for k in 0..n {
+        let (rgb, depth) = match wk.hits[k] {
+            None => (s.background, f32::INFINITY),
+            Some(h) => (wk.base[k] * wk.light[k], h.t),
+        };
+        wk.acc[k] += rgb;
+        wk.dmin[k] = wk.dmin[k].min(depth);
+    }
+}
