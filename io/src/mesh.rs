@@ -13,6 +13,8 @@ use base64::Engine as _;
 use glam::{DMat4, DVec3, Vec3};
 use rothray_primitives::mesh::{InsideRule, MeshData, MeshError};
 
+use crate::files::{FileError, Files, LoadOptions};
+
 /// At most this many triangles (and vertices) after instancing: a hostile glTF can
 /// reference one mesh from many nodes.
 pub const MAX_TRIANGLES: usize = 1 << 26;
@@ -29,6 +31,14 @@ pub enum MeshLoadError {
         path: PathBuf,
         /// Cause.
         source: std::io::Error,
+    },
+    /// The file, or a file it names, is outside the allowed folders or not a
+    /// regular file (see [`crate::files`]); it was not opened.
+    #[error("{source}")]
+    File {
+        /// Why.
+        #[from]
+        source: FileError,
     },
     /// Not `.obj`, `.gltf` or `.glb`.
     #[error("{path}: unknown mesh format (expected .obj, .gltf or .glb)")]
@@ -122,13 +132,35 @@ pub enum MeshLoadError {
 pub type LoadedMesh = (Vec<Vec3>, Vec<[u32; 3]>, Vec<String>);
 
 /// Loads every triangle of an `.obj`, `.gltf` or `.glb` file (chosen by extension).
+/// The files it names (glTF buffers) must lie in the mesh's own folder: see
+/// [`load_mesh_in`] to allow others.
 pub fn load_mesh(path: &Path) -> Result<LoadedMesh, MeshLoadError> {
+    let (path, files) = user_mesh(path, &LoadOptions::default())?;
+    load_mesh_in(&path, &files)
+}
+
+/// The mesh named on the command line (`rothray check MESH`): canonical, so that
+/// its folder, where its buffers must lie, is the real one and not a link's; and
+/// the [`Files`] that confine what it names to that folder and `opts.allow_paths`.
+pub fn user_mesh(path: &Path, opts: &LoadOptions) -> Result<(PathBuf, Files), MeshLoadError> {
+    let real = std::fs::canonicalize(path).map_err(|source| MeshLoadError::Io { path: path.into(), source })?;
+    let files = Files::new(real.parent().unwrap_or(Path::new("/")), opts);
+    Ok((real, files))
+}
+
+/// [`load_mesh`], reading only what `files` allows (the mesh file itself too);
+/// `files` records what was opened.
+pub fn load_mesh_in(path: &Path, files: &Files) -> Result<LoadedMesh, MeshLoadError> {
     let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
-    let bytes = std::fs::read(path).map_err(|source| MeshLoadError::Io { path: path.into(), source })?;
+    // The format is known from the name before anything is opened: a file that is
+    // not a mesh is never read (and so never quoted in a message).
+    if !matches!(ext.as_deref(), Some("obj" | "gltf" | "glb")) {
+        return Err(MeshLoadError::UnknownFormat { path: path.into() });
+    }
+    let bytes = files.read(path).map_err(|source| MeshLoadError::File { source })?;
     let r = match ext.as_deref() {
         Some("obj") => load_obj(path, &bytes)?,
-        Some("gltf") | Some("glb") => load_gltf(path, &bytes)?,
-        _ => return Err(MeshLoadError::UnknownFormat { path: path.into() }),
+        _ => load_gltf(path, &bytes, files)?,
     };
     if r.1.is_empty() {
         return Err(MeshLoadError::Empty { path: path.into() });
@@ -139,7 +171,13 @@ pub fn load_mesh(path: &Path) -> Result<LoadedMesh, MeshLoadError> {
 /// [`load_mesh`] then [`MeshData::new`]; the warnings of both are returned (also
 /// kept in [`MeshData::warnings`] for the second).
 pub fn load_mesh_data(path: &Path, rule: InsideRule) -> Result<(MeshData, Vec<String>), MeshLoadError> {
-    let (pos, tris, mut warnings) = load_mesh(path)?;
+    let (path, files) = user_mesh(path, &LoadOptions::default())?;
+    load_mesh_data_in(&path, rule, &files)
+}
+
+/// [`load_mesh_in`] then [`MeshData::new`].
+pub fn load_mesh_data_in(path: &Path, rule: InsideRule, files: &Files) -> Result<(MeshData, Vec<String>), MeshLoadError> {
+    let (pos, tris, mut warnings) = load_mesh_in(path, files)?;
     let m = MeshData::new(pos, tris, rule).map_err(|source| MeshLoadError::Mesh { path: path.into(), source })?;
     warnings.extend(m.warnings().iter().cloned());
     Ok((m, warnings))
@@ -314,6 +352,7 @@ const HARMLESS_EXTENSIONS: &[&str] = &[
 
 struct GltfCtx<'a> {
     path: &'a Path,
+    files: &'a Files,
     doc: &'a gltf::Document,
     blob: Option<&'a [u8]>,
     buffers: Vec<Option<Vec<u8>>>,
@@ -322,7 +361,7 @@ struct GltfCtx<'a> {
     warnings: Vec<String>,
 }
 
-fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
+fn load_gltf(path: &Path, bytes: &[u8], files: &Files) -> Result<LoadedMesh, MeshLoadError> {
     let malformed = |place: &str, message: String| MeshLoadError::Malformed {
         path: path.into(),
         place: place.into(),
@@ -374,6 +413,7 @@ fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     let doc = &g.document;
     let mut ctx = GltfCtx {
         path,
+        files,
         doc,
         blob: g.blob.as_deref(),
         buffers: vec![None; doc.buffers().len()],
@@ -665,8 +705,9 @@ impl GltfCtx<'_> {
                         what: format!("buffer URI {uri:?} (only relative files and data URIs)"),
                     });
                 } else {
+                    // Decoded first, so that `..%2F` is a `..` that the folder check sees.
                     let file = self.path.parent().unwrap_or(Path::new(".")).join(percent_decode(uri));
-                    std::fs::read(&file).map_err(|e| missing(format!("cannot read {}: {e}", file.display())))?
+                    self.files.read_prefix(&file, buffer.length() as u64).map_err(|source| MeshLoadError::File { source })?
                 }
             }
         };

@@ -15,6 +15,8 @@ use rothray_primitives::LeafShape;
 use serde::Deserialize;
 use serde_json::{Map, Value};
 
+use crate::files::{read_user_text, FileError, Files, LoadOptions};
+
 /// A scene file, loaded: settings plus a World holding its solids.
 pub struct SceneFile {
     /// The file it came from.
@@ -37,6 +39,9 @@ pub struct SceneFile {
     pub objects: Vec<Entity>,
     /// Warnings (e.g. from mesh import).
     pub warnings: Vec<String>,
+    /// Every file the load opened (canonical), the scene file first: the record
+    /// that shows no file outside the allowed folders was touched.
+    pub files_read: Vec<PathBuf>,
 }
 
 /// A scene that could not be loaded.
@@ -49,6 +54,14 @@ pub enum SceneError {
         file: String,
         /// Cause.
         source: std::io::Error,
+    },
+    /// The scene file is not a regular file or cannot be read.
+    #[error("{source}")]
+    File {
+        /// File.
+        file: String,
+        /// Why.
+        source: FileError,
     },
     /// Not JSON.
     #[error("{file}:{line}:{column}: invalid JSON: {message}")]
@@ -77,6 +90,7 @@ pub enum SceneError {
 struct Ctx<'a> {
     file: String,
     dir: &'a Path,
+    files: &'a Files,
     world: World,
     names: std::collections::HashSet<String>,
     warnings: Vec<String>,
@@ -164,48 +178,83 @@ const LEAF_KINDS: &[&str] =
     &["sphere", "box", "cylinder", "cone", "torus", "plane", "swept_sphere", "generalized_cylinder", "mesh"];
 const NODE_KINDS: &[&str] = &["union", "intersection", "difference", "transformed"];
 
-/// Loads a scene file (mesh paths are relative to it). Runs on a thread with a
-/// large stack so that deeply nested scenes (10 000 levels) parse.
+/// Loads a scene file (mesh paths are relative to it); the files it names must
+/// lie in its folder (see [`load_scene_with`] to allow others). Runs on a thread
+/// with a large stack so that deeply nested scenes (100 000 levels) parse.
 pub fn load_scene(path: &Path) -> Result<SceneFile, SceneError> {
-    let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { file: file.clone(), source })?;
-    parse_scene(&text, path)
+    load_scene_with(path, &LoadOptions::default())
 }
 
-/// Parses scene text; `path` names the file in errors and anchors relative mesh paths.
+/// [`load_scene`] with options: the folders, besides the scene's own, that the
+/// files it names may lie in.
+pub fn load_scene_with(path: &Path, opts: &LoadOptions) -> Result<SceneFile, SceneError> {
+    let file = path.display().to_string();
+    let text = read_user_text(path).map_err(|e| SceneError::File { file: file.clone(), source: e })?;
+    let mut sf = parse_scene_with(&text, path, opts)?;
+    if let Ok(real) = std::fs::canonicalize(path) {
+        sf.files_read.insert(0, real);
+    }
+    Ok(sf)
+}
+
+/// Parses scene text; `path` names the file in errors and anchors relative mesh
+/// paths, which must lie in its folder.
 pub fn parse_scene(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
+    parse_scene_with(text, path, &LoadOptions::default())
+}
+
+/// [`parse_scene`] with options (see [`load_scene_with`]).
+pub fn parse_scene_with(text: &str, path: &Path, opts: &LoadOptions) -> Result<SceneFile, SceneError> {
+    // The scene's real folder: mesh paths are relative to the file that names
+    // them, and a link to a scene must not widen what that scene may read.
+    let dir = match std::fs::canonicalize(path) {
+        Ok(real) => real.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("/")),
+        Err(_) => path.parent().map(Path::to_path_buf).unwrap_or_default(),
+    };
+    let files = Files::new(&dir, opts);
     // Deep nesting recurses: parse on a thread with a large stack (address space
     // only; pages are touched as used). If the system refuses that much, try less.
+    let crashed = || SceneError::Invalid {
+        file: path.display().to_string(),
+        at: "(unknown)".into(),
+        message: "the parser crashed (a bug: please report this scene)".into(),
+    };
+    let run = |text: &str, dir: &Path| {
+        // The last line of defence only: every input is meant to end in a typed
+        // error; a panic that escapes anyway becomes a located one, not a crash.
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_scene_inner(text, path, dir, &files)))
+            .unwrap_or_else(|_| Err(crashed()))
+    };
     for stack in [1usize << 30, 1 << 26] {
-        let (t, p) = (text.to_string(), path.to_path_buf());
-        let spawned =
-            std::thread::Builder::new().name("scene-parse".into()).stack_size(stack).spawn(move || parse_scene_inner(&t, &p));
-        if let Ok(h) = spawned {
-            return h.join().unwrap_or_else(|_| {
-                Err(SceneError::Invalid {
-                    file: path.display().to_string(),
-                    at: String::new(),
-                    message: "the parser crashed (please report this scene)".into(),
-                })
-            });
+        let spawned = std::thread::scope(|sc| {
+            std::thread::Builder::new()
+                .name("scene-parse".into())
+                .stack_size(stack)
+                .spawn_scoped(sc, || run(text, &dir))
+                .map(|h| h.join().unwrap_or_else(|_| Err(crashed())))
+        });
+        if let Ok(r) = spawned {
+            return r;
         }
     }
-    parse_scene_inner(text, path)
+    run(text, &dir)
 }
 
-fn parse_scene_inner(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
+fn parse_scene_inner(text: &str, path: &Path, dir: &Path, files: &Files) -> Result<SceneFile, SceneError> {
     let file = path.display().to_string();
     let mut de = serde_json::Deserializer::from_str(text);
     de.disable_recursion_limit();
     let root = Value::deserialize(&mut de)
         .and_then(|v| de.end().map(|_| v))
         .map_err(|e| SceneError::Json { file: file.clone(), line: e.line(), column: e.column(), message: e.to_string() })?;
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let mut cx = Ctx { file, dir, world: World::new(), names: Default::default(), warnings: Vec::new(), meshes: HashMap::new() };
+    let mut cx = Ctx { file, dir, files, world: World::new(), names: Default::default(), warnings: Vec::new(), meshes: HashMap::new() };
     let res = parse_root(&mut cx, &root, path);
     // Deep trees drop recursively: do it here, on the big stack.
     drop(root);
-    res
+    res.map(|mut sf| {
+        sf.files_read = files.opened();
+        sf
+    })
 }
 
 fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
@@ -330,6 +379,7 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
         world,
         objects,
         warnings: std::mem::take(&mut cx.warnings),
+        files_read: Vec::new(),
     })
 }
 
@@ -604,12 +654,17 @@ fn parse_mesh(cx: &mut Ctx, body: &Value, at: &str) -> R<Arc<MeshData>> {
         Some(v) => return cx.err(&join(at, "inside"), format!("expected \"orientation\" or \"winding\", got {v}")),
     };
     let full = cx.dir.join(rel);
-    let key = (std::fs::canonicalize(&full).unwrap_or(full.clone()), winding);
+    // Checked here, before anything is opened, so that the message is located.
+    let real = match cx.files.resolve(&full) {
+        Ok(r) => r,
+        Err(e) => return cx.err(&pat, e.to_string()),
+    };
+    let key = (real, winding);
     if let Some(d) = cx.meshes.get(&key) {
         return Ok(d.clone());
     }
     let rule = if winding { InsideRule::Winding } else { InsideRule::Orientation };
-    match crate::mesh::load_mesh_data(&full, rule) {
+    match crate::mesh::load_mesh_data_in(&full, rule, cx.files) {
         Ok((data, warnings)) => {
             for w in warnings {
                 cx.warnings.push(format!("{}: {pat}: {w}", cx.file));
