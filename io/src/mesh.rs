@@ -151,6 +151,18 @@ pub fn user_mesh(path: &Path, opts: &LoadOptions) -> Result<(PathBuf, Files), Me
 /// [`load_mesh`], reading only what `files` allows (the mesh file itself too);
 /// `files` records what was opened.
 pub fn load_mesh_in(path: &Path, files: &Files) -> Result<LoadedMesh, MeshLoadError> {
+    // The last line of defence only: every input is meant to end in a typed
+    // error; a panic in a reader (ours or a dependency's) becomes a located one.
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_mesh_unguarded(path, files))).unwrap_or_else(|_| {
+        Err(MeshLoadError::Malformed {
+            path: path.into(),
+            place: "(unknown)".into(),
+            message: "the mesh reader crashed (a bug: please report this file)".into(),
+        })
+    })
+}
+
+fn load_mesh_unguarded(path: &Path, files: &Files) -> Result<LoadedMesh, MeshLoadError> {
     let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     // The format is known from the name before anything is opened: a file that is
     // not a mesh is never read (and so never quoted in a message).
@@ -403,6 +415,7 @@ fn load_gltf(path: &Path, bytes: &[u8], files: &Files) -> Result<LoadedMesh, Mes
     {
         use gltf::json::validation::{Error as VError, Validate};
         let root = g.document.as_json();
+        check_mesh_accessor_indices(path, root)?;
         let mut errors = Vec::new();
         root.validate(root, gltf::json::Path::new, &mut |path, error| errors.push((path(), error)));
         errors.retain(|(p, e)| !(*e == VError::Missing && (p.as_str().ends_with(".min") || p.as_str().ends_with(".max"))));
@@ -450,6 +463,46 @@ fn load_gltf(path: &Path, bytes: &[u8], files: &Files) -> Result<LoadedMesh, Mes
         }
     }
     Ok((ctx.pos, ctx.tris, ctx.warnings))
+}
+
+/// gltf-json's own validation indexes `accessors` with a primitive's POSITION
+/// index unchecked (gltf-json 1.4.1, mesh.rs: `&root.accessors[...]`), so a file
+/// with `"POSITION": 99` panics inside it. Every accessor index of every
+/// primitive (attributes, indices, morph targets) is checked here first.
+fn check_mesh_accessor_indices(path: &Path, root: &gltf::json::Root) -> Result<(), MeshLoadError> {
+    let n = root.accessors.len();
+    let bad = |place: String, index: usize| MeshLoadError::Malformed {
+        path: path.into(),
+        place,
+        message: format!("accessor {index} does not exist ({n} accessors)"),
+    };
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            let place = format!("meshes[{mi}].primitives[{pi}]");
+            for (sem, a) in &prim.attributes {
+                if a.value() >= n {
+                    let name = match sem {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".into(),
+                    };
+                    return Err(bad(format!("{place}.attributes.{name}"), a.value()));
+                }
+            }
+            if let Some(a) = &prim.indices {
+                if a.value() >= n {
+                    return Err(bad(format!("{place}.indices"), a.value()));
+                }
+            }
+            for (ti, t) in prim.targets.iter().flatten().enumerate() {
+                for (k, a) in [("POSITION", &t.positions), ("NORMAL", &t.normals), ("TANGENT", &t.tangents)] {
+                    if let Some(a) = a.filter(|a| a.value() >= n) {
+                        return Err(bad(format!("{place}.targets[{ti}].{k}"), a.value()));
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `asset.version` of a .gltf (glTF 1.0 files fail to parse as 2.0 with a confusing message).

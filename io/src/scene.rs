@@ -15,6 +15,7 @@ use rothray_primitives::LeafShape;
 use serde::Deserialize;
 use serde_json::{Map, Value};
 
+use crate::json_path::At;
 use crate::files::{read_user_text, FileError, Files, LoadOptions};
 
 /// A scene file, loaded: settings plus a World holding its solids.
@@ -99,20 +100,41 @@ struct Ctx<'a> {
 
 type R<T> = Result<T, SceneError>;
 
-impl Ctx<'_> {
-    fn err<T>(&self, at: &str, message: impl Into<String>) -> R<T> {
-        Err(SceneError::Invalid { file: self.file.clone(), at: at.to_string(), message: message.into() })
+/// A place for an error: a spelled-out path (`&str`, near the leaves) or an
+/// implicit one ([`At`], while descending the shape tree).
+trait Loc {
+    fn render(&self) -> String;
+}
+impl Loc for str {
+    fn render(&self) -> String {
+        self.to_string()
     }
-    fn obj<'v>(&self, v: &'v Value, at: &str) -> R<&'v Map<String, Value>> {
+}
+impl Loc for String {
+    fn render(&self) -> String {
+        self.clone()
+    }
+}
+impl Loc for At<'_> {
+    fn render(&self) -> String {
+        At::render(self)
+    }
+}
+
+impl Ctx<'_> {
+    fn err<T>(&self, at: &(impl Loc + ?Sized), message: impl Into<String>) -> R<T> {
+        Err(SceneError::Invalid { file: self.file.clone(), at: at.render(), message: message.into() })
+    }
+    fn obj<'v>(&self, v: &'v Value, at: &(impl Loc + ?Sized)) -> R<&'v Map<String, Value>> {
         match v.as_object() {
             Some(m) => Ok(m),
             None => self.err(at, format!("expected an object, got {}", kind_of(v))),
         }
     }
-    fn keys(&self, m: &Map<String, Value>, at: &str, allowed: &[&str], required: &[&str]) -> R<()> {
+    fn keys(&self, m: &Map<String, Value>, at: &(impl Loc + ?Sized), allowed: &[&str], required: &[&str]) -> R<()> {
         for k in m.keys() {
             if !allowed.contains(&k.as_str()) {
-                return self.err(&join(at, k), format!("unknown key `{k}` (expected one of: {})", allowed.join(", ")));
+                return self.err(&join(&at.render(), k), format!("unknown key `{k}` (expected one of: {})", allowed.join(", ")));
             }
         }
         for r in required {
@@ -122,32 +144,33 @@ impl Ctx<'_> {
         }
         Ok(())
     }
-    fn num(&self, v: &Value, at: &str) -> R<f64> {
+    fn num(&self, v: &Value, at: &(impl Loc + ?Sized)) -> R<f64> {
         match v.as_f64() {
             Some(x) if x.is_finite() && (x.abs() <= f32::MAX as f64) => Ok(x),
             Some(x) => self.err(at, format!("number {x} is not finite in f32")),
             None => self.err(at, format!("expected a number, got {}", kind_of(v))),
         }
     }
-    fn vec3(&self, v: &Value, at: &str) -> R<DVec3> {
+    fn vec3(&self, v: &Value, at: &(impl Loc + ?Sized)) -> R<DVec3> {
+        // The element's place is spelled out only for an error.
+        let num = |k: usize| self.num(&v[k], &format!("{}[{k}]", at.render()));
         match v.as_array() {
-            Some(a) if a.len() == 3 => Ok(DVec3::new(
-                self.num(&a[0], &format!("{at}[0]"))?,
-                self.num(&a[1], &format!("{at}[1]"))?,
-                self.num(&a[2], &format!("{at}[2]"))?,
-            )),
+            Some(a) if a.len() == 3 && a.iter().all(|x| self.num(x, "").is_ok()) => {
+                Ok(DVec3::new(a[0].as_f64().unwrap_or(0.0), a[1].as_f64().unwrap_or(0.0), a[2].as_f64().unwrap_or(0.0)))
+            }
+            Some(a) if a.len() == 3 => Ok(DVec3::new(num(0)?, num(1)?, num(2)?)),
             Some(a) => self.err(at, format!("expected an array of 3 numbers, got {} elements", a.len())),
             None => self.err(at, format!("expected an array of 3 numbers, got {}", kind_of(v))),
         }
     }
-    fn color(&self, v: &Value, at: &str) -> R<Vec3> {
+    fn color(&self, v: &Value, at: &(impl Loc + ?Sized)) -> R<Vec3> {
         let c = self.vec3(v, at)?;
         if c.min_element() < 0.0 {
             return self.err(at, "colour components must be >= 0");
         }
         Ok(c.as_vec3())
     }
-    fn name(&mut self, v: &Value, at: &str) -> R<String> {
+    fn name(&mut self, v: &Value, at: &(impl Loc + ?Sized)) -> R<String> {
         let Some(s) = v.as_str() else { return self.err(at, format!("expected a string, got {}", kind_of(v))) };
         if s.is_empty() {
             return self.err(at, "name is empty");
@@ -258,7 +281,8 @@ fn parse_scene_inner(text: &str, path: &Path, dir: &Path, files: &Files) -> Resu
 }
 
 fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
-    let m = cx.obj(root, "")?.clone();
+    // Borrowed, not cloned: a clone doubled the memory of a large scene.
+    let m = cx.obj(root, "")?;
     cx.keys(&m, "", &["name", "camera", "image", "background", "lights", "objects"], &["camera", "objects"])?;
     let name = match m.get("name") {
         Some(Value::String(s)) => Some(s.clone()),
@@ -352,7 +376,10 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
             Some(v) => Some(cx.color(v, &format!("{at}.color"))?),
             None => None,
         };
-        let e = parse_shape(cx, &om["shape"], &format!("{at}.shape"))?;
+        let root_at = At::root();
+        let objects_at = root_at.key("objects");
+        let obj_at = objects_at.index(i);
+        let e = parse_shape(cx, &om["shape"], &obj_at.key("shape"))?;
         // The object is its shape's root entity; give it the object's name and order.
         let leaf_name = cx.world.get::<&Name>(e).ok().map(|n| n.0.clone());
         let root = if leaf_name.is_some() && cx.world.get::<&CsgNode>(e).is_err() {
@@ -383,7 +410,7 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
     })
 }
 
-fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
+fn parse_shape(cx: &mut Ctx, v: &Value, at: &At) -> R<Entity> {
     let m = cx.obj(v, at)?;
     let kinds: Vec<&String> = m.keys().filter(|k| k.as_str() != "name" && k.as_str() != "color").collect();
     if kinds.is_empty() {
@@ -392,18 +419,18 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
     if kinds.len() > 1 {
         return cx.err(at, format!("more than one shape kind: {}", kinds.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")));
     }
-    let kind = kinds[0].clone();
-    let kat = join(at, &kind);
+    let kind = kinds[0].as_str();
+    let kat = at.key(kind);
     let name = match m.get("name") {
-        Some(v) => Some(cx.name(v, &join(at, "name"))?),
+        Some(v) => Some(cx.name(v, &at.key("name"))?),
         None => None,
     };
     let color = match m.get("color") {
-        Some(v) => Some(cx.color(v, &join(at, "color"))?),
+        Some(v) => Some(cx.color(v, &at.key("color"))?),
         None => None,
     };
-    let body = &m[&kind];
-    let e = match kind.as_str() {
+    let body = &m[kind];
+    let e = match kind {
         "union" | "intersection" | "difference" => {
             let Some(arr) = body.as_array() else {
                 return cx.err(&kat, format!("expected an array of shapes, got {}", kind_of(body)));
@@ -413,9 +440,9 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
             }
             let mut children = Vec::with_capacity(arr.len());
             for (i, c) in arr.iter().enumerate() {
-                children.push(parse_shape(cx, c, &format!("{kat}[{i}]"))?);
+                children.push(parse_shape(cx, c, &kat.index(i))?);
             }
-            let op = match kind.as_str() {
+            let op = match kind {
                 "union" => Op::Union,
                 "intersection" => Op::Intersection,
                 _ => Op::Difference,
@@ -428,10 +455,10 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
             let t = if let Some(mv) = tm.get("matrix") {
                 for k in ["translate", "rotate_deg", "scale"] {
                     if tm.contains_key(k) {
-                        return cx.err(&join(&kat, k), "cannot be combined with `matrix`");
+                        return cx.err(&kat.key(k), "cannot be combined with `matrix`");
                     }
                 }
-                let mat = join(&kat, "matrix");
+                let mat = kat.key("matrix").render();
                 let Some(a) = mv.as_array() else { return cx.err(&mat, "expected an array of 16 numbers") };
                 if a.len() != 16 {
                     return cx.err(&mat, format!("expected 16 numbers, got {}", a.len()));
@@ -452,47 +479,52 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
                 Transform::from_mat4(m4)
             } else {
                 let tr = match tm.get("translate") {
-                    Some(v) => cx.vec3(v, &join(&kat, "translate"))?,
+                    Some(v) => cx.vec3(v, &kat.key("translate"))?,
                     None => DVec3::ZERO,
                 };
                 let rot = match tm.get("rotate_deg") {
-                    Some(v) => cx.vec3(v, &join(&kat, "rotate_deg"))?,
+                    Some(v) => cx.vec3(v, &kat.key("rotate_deg"))?,
                     None => DVec3::ZERO,
                 };
                 let sc = match tm.get("scale") {
-                    Some(v) if v.is_number() => DVec3::splat(cx.num(v, &join(&kat, "scale"))?),
-                    Some(v) => cx.vec3(v, &join(&kat, "scale"))?,
+                    Some(v) if v.is_number() => DVec3::splat(cx.num(v, &kat.key("scale"))?),
+                    Some(v) => cx.vec3(v, &kat.key("scale"))?,
                     None => DVec3::ONE,
                 };
                 if sc.x == 0.0 || sc.y == 0.0 || sc.z == 0.0 {
-                    return cx.err(&join(&kat, "scale"), "a zero scale makes the transform singular");
+                    return cx.err(&kat.key("scale"), "a zero scale makes the transform singular");
                 }
                 Transform::from_trs_deg(tr, rot, sc)
             };
-            let child = parse_shape(cx, &tm["shape"], &join(&kat, "shape"))?;
+            let child = parse_shape(cx, &tm["shape"], &kat.key("shape"))?;
             // A transformed node is a one-child union carrying the transform.
             cx.world.spawn((CsgNode::union([child]), t))
         }
-        // Leaves are named by their JSON path unless they have a `name` (set below).
+        // Leaves are named by their JSON path unless they have a `name` (set
+        // below); the path is spelled out here, once per leaf, elided when long.
         "swept_sphere" => {
+            let kat = kat.render();
             let desc = parse_sweep(cx, body, &kat)?;
-            cx.world.spawn((desc, Name::new(kat.clone())))
+            cx.world.spawn((desc, Name::new(kat)))
         }
         "generalized_cylinder" => {
+            let kat = kat.render();
             let desc = parse_gcyl(cx, body, &kat)?;
-            cx.world.spawn((desc, Name::new(kat.clone())))
+            cx.world.spawn((desc, Name::new(kat)))
         }
         "mesh" => {
+            let kat = kat.render();
             let m = parse_mesh(cx, body, &kat)?;
-            cx.world.spawn((MeshSolid(m), Name::new(kat.clone())))
+            cx.world.spawn((MeshSolid(m), Name::new(kat)))
         }
-        _ if LEAF_KINDS.contains(&kind.as_str()) => {
-            let shape = parse_leaf(cx, &kind, body, &kat)?;
+        _ if LEAF_KINDS.contains(&kind) => {
+            let kat = kat.render();
+            let shape = parse_leaf(cx, kind, body, &kat)?;
             if let Err(e) = shape.validate() {
                 let at = join(&kat, e.field);
                 return cx.err(&at, e.message);
             }
-            let path = Name::new(kat.clone());
+            let path = Name::new(kat);
             match shape {
                 LeafShape::Sphere(s) => cx.world.spawn((s, path)),
                 LeafShape::Cuboid(s) => cx.world.spawn((s, path)),
