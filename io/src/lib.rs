@@ -10,6 +10,7 @@
 #![warn(missing_docs)]
 
 pub mod files;
+pub mod json;
 pub mod json_path;
 pub mod mesh;
 pub mod rays;

@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use rothray_primitives::LeafShape;
 use serde::Deserialize;
-use serde_json::{Map, Value};
+use crate::json::{Map, Value};
 
 use crate::json_path::At;
 use crate::files::{read_user_text, FileError, Files, LoadOptions};
@@ -115,6 +115,14 @@ impl Loc for String {
         self.clone()
     }
 }
+/// `parent.key`, spelled out only for an error (a leaf's fields are read on
+/// every leaf; their paths are wanted on almost none).
+struct Sub<'a>(&'a str, &'a str);
+impl Loc for Sub<'_> {
+    fn render(&self) -> String {
+        join(self.0, self.1)
+    }
+}
 impl Loc for At<'_> {
     fn render(&self) -> String {
         At::render(self)
@@ -125,15 +133,15 @@ impl Ctx<'_> {
     fn err<T>(&self, at: &(impl Loc + ?Sized), message: impl Into<String>) -> R<T> {
         Err(SceneError::Invalid { file: self.file.clone(), at: at.render(), message: message.into() })
     }
-    fn obj<'v>(&self, v: &'v Value, at: &(impl Loc + ?Sized)) -> R<&'v Map<String, Value>> {
+    fn obj<'v>(&self, v: &'v Value, at: &(impl Loc + ?Sized)) -> R<&'v Map> {
         match v.as_object() {
             Some(m) => Ok(m),
             None => self.err(at, format!("expected an object, got {}", kind_of(v))),
         }
     }
-    fn keys(&self, m: &Map<String, Value>, at: &(impl Loc + ?Sized), allowed: &[&str], required: &[&str]) -> R<()> {
+    fn keys(&self, m: &Map, at: &(impl Loc + ?Sized), allowed: &[&str], required: &[&str]) -> R<()> {
         for k in m.keys() {
-            if !allowed.contains(&k.as_str()) {
+            if !allowed.contains(&k) {
                 return self.err(&join(&at.render(), k), format!("unknown key `{k}` (expected one of: {})", allowed.join(", ")));
             }
         }
@@ -285,7 +293,7 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
     let m = cx.obj(root, "")?;
     cx.keys(&m, "", &["name", "camera", "image", "background", "lights", "objects"], &["camera", "objects"])?;
     let name = match m.get("name") {
-        Some(Value::String(s)) => Some(s.clone()),
+        Some(Value::String(s)) => Some(s.to_string()),
         Some(v) => return cx.err("name", format!("expected a string, got {}", kind_of(v))),
         None => None,
     };
@@ -412,14 +420,14 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
 
 fn parse_shape(cx: &mut Ctx, v: &Value, at: &At) -> R<Entity> {
     let m = cx.obj(v, at)?;
-    let kinds: Vec<&String> = m.keys().filter(|k| k.as_str() != "name" && k.as_str() != "color").collect();
+    let kinds: Vec<&str> = m.keys().filter(|&k| k != "name" && k != "color").collect();
     if kinds.is_empty() {
         return cx.err(at, format!("missing the shape kind (one of: {}, {})", LEAF_KINDS.join(", "), NODE_KINDS.join(", ")));
     }
     if kinds.len() > 1 {
-        return cx.err(at, format!("more than one shape kind: {}", kinds.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")));
+        return cx.err(at, format!("more than one shape kind: {}", kinds.join(", ")));
     }
-    let kind = kinds[0].as_str();
+    let kind = kinds[0];
     let kat = at.key(kind);
     let name = match m.get("name") {
         Some(v) => Some(cx.name(v, &at.key("name"))?),
@@ -552,7 +560,7 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &At) -> R<Entity> {
 
 fn parse_leaf(cx: &mut Ctx, kind: &str, body: &Value, at: &str) -> R<LeafShape> {
     let m = cx.obj(body, at)?;
-    let f = |k: &str| join(at, k);
+    let f = |k: &'static str| Sub(at, k);
     Ok(match kind {
         "sphere" => {
             cx.keys(m, at, &["center", "radius"], &["center", "radius"])?;
@@ -652,8 +660,8 @@ fn parse_gcyl(cx: &mut Ctx, body: &Value, at: &str) -> R<GeneralizedCylinder> {
     };
     let frame = match m.get("frame") {
         None => Frame::RotationMinimizing,
-        Some(Value::String(f)) if f == "rotation_minimizing" => Frame::RotationMinimizing,
-        Some(Value::String(f)) if f == "frenet" => Frame::Frenet,
+        Some(Value::String(f)) if &**f == "rotation_minimizing" => Frame::RotationMinimizing,
+        Some(Value::String(f)) if &**f == "frenet" => Frame::Frenet,
         Some(v) => return cx.err(&join(at, "frame"), format!("expected \"frenet\" or \"rotation_minimizing\", got {v}")),
     };
     let normal = match m.get("normal") {
@@ -681,8 +689,8 @@ fn parse_mesh(cx: &mut Ctx, body: &Value, at: &str) -> R<Arc<MeshData>> {
     let Some(rel) = m["path"].as_str() else { return cx.err(&pat, "expected a string") };
     let winding = match m.get("inside") {
         None => false,
-        Some(Value::String(s)) if s == "orientation" => false,
-        Some(Value::String(s)) if s == "winding" => true,
+        Some(Value::String(s)) if &**s == "orientation" => false,
+        Some(Value::String(s)) if &**s == "winding" => true,
         Some(v) => return cx.err(&join(at, "inside"), format!("expected \"orientation\" or \"winding\", got {v}")),
     };
     let full = cx.dir.join(rel);
