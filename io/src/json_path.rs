@@ -187,12 +187,21 @@ mod tests {
             let i = u.index(0);
             go(&i, left - 1, out);
         }
-        let r = At::root();
-        let o = r.key("objects");
-        let i = o.index(0);
-        let s = i.key("shape");
-        let mut out = Vec::new();
-        go(&s, 100_000, &mut out);
+        // The links live on the stack, as in the parser: a big one.
+        let out = std::thread::Builder::new()
+            .stack_size(1 << 29)
+            .spawn(|| {
+                let r = At::root();
+                let o = r.key("objects");
+                let i = o.index(0);
+                let s = i.key("shape");
+                let mut out = Vec::new();
+                go(&s, 100_000, &mut out);
+                out
+            })
+            .unwrap()
+            .join()
+            .unwrap();
         let (short, full) = (&out[0], &out[1]);
         assert!(short.len() <= MAX_PATH_CHARS + 40, "{} chars", short.len());
         assert!(short.starts_with("objects[0].shape.union[0]"), "{short}");

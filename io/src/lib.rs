@@ -13,6 +13,7 @@ pub mod files;
 pub mod json;
 pub mod json_path;
 pub mod mesh;
+pub mod polygon;
 pub mod rays;
 pub mod scene;
 

@@ -14,6 +14,7 @@ use glam::{DMat4, DVec3, Vec3};
 use rothray_primitives::mesh::{InsideRule, MeshData, MeshError};
 
 use crate::files::{FileError, Files, LoadOptions};
+use crate::polygon;
 
 /// At most this many triangles (and vertices) after instancing: a hostile glTF can
 /// reference one mesh from many nodes.
@@ -210,14 +211,24 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     // tobj reports no line numbers: a pre-scan counts what it skips and, on an
     // error, finds the line (see `locate_obj_error`).
     let mut skipped = (0usize, 0usize);
-    for l in text.lines() {
-        match l.split_whitespace().next() {
+    // Lines of the faces tobj keeps (3 or more vertices), in order: tobj's faces
+    // come out in file order, so the k-th is on face_lines[k].
+    let mut face_lines: Vec<usize> = Vec::new();
+    let mut short_faces: Vec<usize> = Vec::new();
+    for (i, l) in text.lines().enumerate() {
+        let mut w = l.split_whitespace();
+        match w.next() {
             Some("p") => skipped.0 += 1,
             Some("l") => skipped.1 += 1,
+            Some("f") => match w.count() {
+                0..=2 => short_faces.push(i + 1),
+                _ => face_lines.push(i + 1),
+            },
             _ => {}
         }
     }
-    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
+    // Faces are triangulated here, not by tobj: see `polygon`.
+    let opts = tobj::LoadOptions { triangulate: false, single_index: false, ignore_points: true, ignore_lines: true };
     let (models, _materials) =
         tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &opts, |_| Err(tobj::LoadError::OpenFileFailed))
             .map_err(|e| {
@@ -231,6 +242,20 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     if skipped.0 > 0 || skipped.1 > 0 {
         warnings.push(format!("{}: skipped {} point and {} line elements", path.display(), skipped.0, skipped.1));
     }
+    // A face of one or two vertices bounds nothing: skipped, like `l` lines, and
+    // said so with its line (the first few, then a count).
+    if !short_faces.is_empty() {
+        let shown: Vec<String> = short_faces.iter().take(5).map(|l| l.to_string()).collect();
+        let more = if short_faces.len() > 5 { format!(" and {} more", short_faces.len() - 5) } else { String::new() };
+        warnings.push(format!(
+            "{}: line {}{more}: skipped {} face(s) with fewer than 3 vertices",
+            path.display(),
+            shown.join(", "),
+            short_faces.len()
+        ));
+    }
+    let mut forced: Vec<String> = Vec::new();
+    let mut face_no = 0usize;
     let mut pos: Vec<Vec3> = vec![];
     let mut tris: Vec<[u32; 3]> = vec![];
     for m in &models {
@@ -251,19 +276,49 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
             pos.push(v);
         }
         let n = mesh.positions.len() / 3;
-        for t in mesh.indices.chunks_exact(3) {
-            for &k in t {
-                if k as usize >= n {
-                    return Err(MeshLoadError::IndexOutOfRange {
-                        path: path.into(),
-                        place: format!("object {:?}", m.name),
-                        index: k as u64,
-                        count: n,
-                    });
-                }
-            }
-            tris.push([t[0] + base as u32, t[1] + base as u32, t[2] + base as u32]);
+        if let Some(&k) = mesh.indices.iter().find(|&&k| k as usize >= n) {
+            return Err(MeshLoadError::IndexOutOfRange {
+                path: path.into(),
+                place: format!("object {:?}", m.name),
+                index: k as u64,
+                count: n,
+            });
         }
+        // face_arities is empty when every face is a triangle.
+        let all_tris;
+        let arities: &[u32] = if mesh.face_arities.is_empty() {
+            all_tris = vec![3u32; mesh.indices.len() / 3];
+            &all_tris
+        } else {
+            &mesh.face_arities
+        };
+        let local = &pos[base..];
+        let mut at = 0usize;
+        let mut face_tris = Vec::new();
+        for &a in arities {
+            let a = a as usize;
+            let Some(face) = mesh.indices.get(at..at + a) else { break };
+            at += a;
+            face_tris.clear();
+            if polygon::triangulate(local, face, &mut face_tris) == polygon::Method::Forced {
+                let line = face_lines.get(face_no).map_or_else(|| format!("face {face_no}"), |l| format!("line {l}"));
+                forced.push(format!("{line} ({a} vertices)"));
+            }
+            face_no += 1;
+            if tris.len() + face_tris.len() > MAX_TRIANGLES {
+                return Err(MeshLoadError::TooLarge { path: path.into() });
+            }
+            tris.extend(face_tris.iter().map(|t| t.map(|k| k + base as u32)));
+        }
+    }
+    if !forced.is_empty() {
+        let more = if forced.len() > 5 { format!(" and {} more", forced.len() - 5) } else { String::new() };
+        warnings.push(format!(
+            "{}: {}{more}: non-convex face(s) too large to ear-clip (more than {} vertices) or not simple, split by halving; triangles may lie outside the face",
+            path.display(),
+            forced.iter().take(5).cloned().collect::<Vec<_>>().join(", "),
+            polygon::MAX_EAR_CLIP
+        ));
     }
     Ok((pos, tris, warnings))
 }
@@ -478,7 +533,7 @@ fn check_mesh_accessor_indices(path: &Path, root: &gltf::json::Root) -> Result<(
     };
     for (mi, mesh) in root.meshes.iter().enumerate() {
         for (pi, prim) in mesh.primitives.iter().enumerate() {
-            let place = format!("meshes[{mi}].primitives[{pi}]");
+            let place = format!("JSON at meshes[{mi}].primitives[{pi}]");
             for (sem, a) in &prim.attributes {
                 if a.value() >= n {
                     let name = match sem {
@@ -760,7 +815,7 @@ impl GltfCtx<'_> {
                 } else {
                     // Decoded first, so that `..%2F` is a `..` that the folder check sees.
                     let file = self.path.parent().unwrap_or(Path::new(".")).join(percent_decode(uri));
-                    self.files.read_prefix(&file, buffer.length() as u64).map_err(|source| MeshLoadError::File { source })?
+                    self.files.read_prefix(&file, buffer.length() as u64).map_err(|e| missing(e.to_string()))?
                 }
             }
         };
