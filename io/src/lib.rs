@@ -19,7 +19,7 @@ pub mod scene;
 
 pub use files::{FileError, Files, LoadOptions};
 pub use mesh::{load_mesh, load_mesh_data, load_mesh_data_in, load_mesh_in, user_mesh, MeshLoadError};
-pub use scene::{load_scene, load_scene_with, parse_scene, parse_scene_with, SceneError, SceneFile};
+pub use scene::{load_scene, load_scene_recorded, load_scene_with, parse_scene, parse_scene_with, SceneError, SceneFile};
 
 /// Writes an RGB8 image as PNG.
 pub fn write_png(path: &std::path::Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), image::ImageError> {

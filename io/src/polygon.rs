@@ -83,17 +83,30 @@ fn cross(o: DVec2, a: DVec2, b: DVec2) -> f64 {
     (a - o).perp_dot(b - o)
 }
 
-/// Every turn is to the left (or straight) and the turns add up to one full
-/// turn: convex and simple.
+/// Every turn is to the left, or a dent no deeper than the rounding of the
+/// coordinates (a 1 000 000-gon stored in f32 has thousands of those), and the
+/// turns add up to one full turn: convex and simple, up to rounding.
 fn is_convex(p: &[DVec2]) -> bool {
     let n = p.len();
+    let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+    for q in p {
+        lo = lo.min(*q);
+        hi = hi.max(*q);
+    }
+    let size = (hi - lo).length();
+    let mag = lo.abs().max(hi.abs()).max_element();
+    let dent_tol = 1e-6 * size + 4.0 * f32::EPSILON as f64 * mag;
     let mut total = 0.0;
     for i in 0..n {
         let (a, b, c) = (p[(i + n - 1) % n], p[i], p[(i + 1) % n]);
         let (e0, e1) = (b - a, c - b);
         let turn = e0.perp_dot(e1).atan2(e0.dot(e1));
-        if turn < -1e-12 {
-            return false;
+        if turn < 0.0 {
+            let base = (c - a).length();
+            let depth = if base > 0.0 { cross(a, b, c).abs() / base } else { (b - a).length() };
+            if depth > dent_tol {
+                return false;
+            }
         }
         total += turn;
     }
@@ -183,6 +196,22 @@ mod tests {
         assert!((area(&pos, &t) - want).abs() < 1e-4, "{} vs {want}", area(&pos, &t));
         // No triangle is a sliver from vertex 0, as a fan's would be.
         assert!(t.iter().filter(|t| t.contains(&0)).count() < 20);
+    }
+
+    /// A 1 000 000-gon in f32 has dents at the rounding level: still convex.
+    #[test]
+    fn a_huge_face_in_f32_is_convex_up_to_rounding() {
+        let n = 1_000_000;
+        let pos = circle(n);
+        let idx: Vec<u32> = (0..n as u32).collect();
+        let mut t = Vec::new();
+        assert_eq!(triangulate(&pos, &idx, &mut t), Method::Convex);
+        assert_eq!(t.len(), n - 2);
+        // A real dent is not rounding.
+        let mut pos = circle(500);
+        pos[10] *= 0.9;
+        let idx: Vec<u32> = (0..500).collect();
+        assert_eq!(triangulate(&pos, &idx, &mut Vec::new()), Method::EarClipped);
     }
 
     #[test]

@@ -219,13 +219,25 @@ pub fn load_scene(path: &Path) -> Result<SceneFile, SceneError> {
 /// [`load_scene`] with options: the folders, besides the scene's own, that the
 /// files it names may lie in.
 pub fn load_scene_with(path: &Path, opts: &LoadOptions) -> Result<SceneFile, SceneError> {
+    load_scene_recorded(path, opts).0
+}
+
+/// [`load_scene_with`], plus every file the load opened (canonical), whether it
+/// succeeded or not: the record that shows what a scene made the loader read.
+pub fn load_scene_recorded(path: &Path, opts: &LoadOptions) -> (Result<SceneFile, SceneError>, Vec<PathBuf>) {
     let file = path.display().to_string();
-    let text = read_user_text(path).map_err(|e| SceneError::File { file: file.clone(), source: e })?;
-    let mut sf = parse_scene_with(&text, path, opts)?;
-    if let Ok(real) = std::fs::canonicalize(path) {
-        sf.files_read.insert(0, real);
-    }
-    Ok(sf)
+    let text = match read_user_text(path) {
+        Ok(t) => t,
+        Err(e) => return (Err(SceneError::File { file, source: e }), Vec::new()),
+    };
+    let (dir, files) = scene_files(path, opts);
+    let mut opened: Vec<PathBuf> = std::fs::canonicalize(path).into_iter().collect();
+    let r = parse_scene_in(&text, path, &dir, &files).map(|mut sf| {
+        sf.files_read.splice(0..0, opened.iter().cloned());
+        sf
+    });
+    opened.extend(files.opened());
+    (r, opened)
 }
 
 /// Parses scene text; `path` names the file in errors and anchors relative mesh
@@ -236,13 +248,23 @@ pub fn parse_scene(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
 
 /// [`parse_scene`] with options (see [`load_scene_with`]).
 pub fn parse_scene_with(text: &str, path: &Path, opts: &LoadOptions) -> Result<SceneFile, SceneError> {
-    // The scene's real folder: mesh paths are relative to the file that names
-    // them, and a link to a scene must not widen what that scene may read.
+    let (dir, files) = scene_files(path, opts);
+    parse_scene_in(text, path, &dir, &files)
+}
+
+/// The scene's real folder and the files it may read. Mesh paths are relative
+/// to the real file that names them, and a link to a scene must not widen what
+/// that scene may read.
+fn scene_files(path: &Path, opts: &LoadOptions) -> (PathBuf, Files) {
     let dir = match std::fs::canonicalize(path) {
         Ok(real) => real.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("/")),
         Err(_) => path.parent().map(Path::to_path_buf).unwrap_or_default(),
     };
     let files = Files::new(&dir, opts);
+    (dir, files)
+}
+
+fn parse_scene_in(text: &str, path: &Path, dir: &Path, files: &Files) -> Result<SceneFile, SceneError> {
     // Deep nesting recurses: parse on a thread with a large stack (address space
     // only; pages are touched as used). If the system refuses that much, try less.
     let crashed = || SceneError::Invalid {
@@ -253,7 +275,7 @@ pub fn parse_scene_with(text: &str, path: &Path, opts: &LoadOptions) -> Result<S
     let run = |text: &str, dir: &Path| {
         // The last line of defence only: every input is meant to end in a typed
         // error; a panic that escapes anyway becomes a located one, not a crash.
-        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_scene_inner(text, path, dir, &files)))
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_scene_inner(text, path, dir, files)))
             .unwrap_or_else(|_| Err(crashed()))
     };
     for stack in [1usize << 30, 1 << 26] {
@@ -261,14 +283,14 @@ pub fn parse_scene_with(text: &str, path: &Path, opts: &LoadOptions) -> Result<S
             std::thread::Builder::new()
                 .name("scene-parse".into())
                 .stack_size(stack)
-                .spawn_scoped(sc, || run(text, &dir))
+                .spawn_scoped(sc, || run(text, dir))
                 .map(|h| h.join().unwrap_or_else(|_| Err(crashed())))
         });
         if let Ok(r) = spawned {
             return r;
         }
     }
-    run(text, &dir)
+    run(text, dir)
 }
 
 fn parse_scene_inner(text: &str, path: &Path, dir: &Path, files: &Files) -> Result<SceneFile, SceneError> {
