@@ -139,6 +139,10 @@ impl<'a> At<'a> {
             }
         }
         let left_out = tail_top.depth - head_depth - 1;
+        if left_out == 0 {
+            // A few long keys, not depth: nothing to elide between the ends.
+            return self.full();
+        }
         let mut tail = String::new();
         for a in self.segments_from(tail_top.depth - 1) {
             Self::push_seg(&mut tail, a);

@@ -154,7 +154,7 @@ impl Ctx<'_> {
     }
     fn num(&self, v: &Value, at: &(impl Loc + ?Sized)) -> R<f64> {
         match v.as_f64() {
-            Some(x) if x.is_finite() && (x.abs() <= f32::MAX as f64) => Ok(x),
+            Some(x) if finite_f32(v).is_some() => Ok(x),
             Some(x) => self.err(at, format!("number {x} is not finite in f32")),
             None => self.err(at, format!("expected a number, got {}", kind_of(v))),
         }
@@ -163,10 +163,10 @@ impl Ctx<'_> {
         // The element's place is spelled out only for an error.
         let num = |k: usize| self.num(&v[k], &format!("{}[{k}]", at.render()));
         match v.as_array() {
-            Some(a) if a.len() == 3 && a.iter().all(|x| self.num(x, "").is_ok()) => {
-                Ok(DVec3::new(a[0].as_f64().unwrap_or(0.0), a[1].as_f64().unwrap_or(0.0), a[2].as_f64().unwrap_or(0.0)))
-            }
-            Some(a) if a.len() == 3 => Ok(DVec3::new(num(0)?, num(1)?, num(2)?)),
+            Some([x, y, z]) => match (finite_f32(x), finite_f32(y), finite_f32(z)) {
+                (Some(x), Some(y), Some(z)) => Ok(DVec3::new(x, y, z)),
+                _ => Ok(DVec3::new(num(0)?, num(1)?, num(2)?)),
+            },
             Some(a) => self.err(at, format!("expected an array of 3 numbers, got {} elements", a.len())),
             None => self.err(at, format!("expected an array of 3 numbers, got {}", kind_of(v))),
         }
@@ -188,6 +188,11 @@ impl Ctx<'_> {
         }
         Ok(s.to_string())
     }
+}
+
+/// The number, if it is one and finite in f32.
+fn finite_f32(v: &Value) -> Option<f64> {
+    v.as_f64().filter(|x| x.is_finite() && x.abs() <= f32::MAX as f64)
 }
 
 fn join(at: &str, k: &str) -> String {
