@@ -146,7 +146,7 @@ impl Ctx<'_> {
             }
         }
         for r in required {
-            if !m.contains_key(*r) {
+            if !m.contains_key(r) {
                 return self.err(at, format!("missing field `{r}`"));
             }
         }
@@ -318,7 +318,7 @@ fn parse_scene_inner(text: &str, path: &Path, dir: &Path, files: &Files) -> Resu
 fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
     // Borrowed, not cloned: a clone doubled the memory of a large scene.
     let m = cx.obj(root, "")?;
-    cx.keys(&m, "", &["name", "camera", "image", "background", "lights", "objects"], &["camera", "objects"])?;
+    cx.keys(m, "", &["name", "camera", "image", "background", "lights", "objects"], &["camera", "objects"])?;
     let name = match m.get("name") {
         Some(Value::String(s)) => Some(s.to_string()),
         Some(v) => return cx.err("name", format!("expected a string, got {}", kind_of(v))),
