@@ -140,7 +140,9 @@ impl Files {
 /// Reads a file the user named directly (a scene or a ray file on the command
 /// line): no folder rule, but only a regular file.
 pub fn read_user_file(path: &Path) -> Result<Vec<u8>, FileError> {
-    read_regular(path, path, None)
+    // Resolved first: the file is opened without following a final link.
+    let real = std::fs::canonicalize(path).map_err(|source| FileError::Io { path: path.into(), source })?;
+    read_regular(&real, path, None)
 }
 
 /// [`read_user_file`] as UTF-8 text.
@@ -186,6 +188,25 @@ const O_NONBLOCK: i32 = 0o4000;
 #[cfg(any(target_os = "macos", target_os = "ios", target_os = "freebsd", target_os = "openbsd", target_os = "netbsd"))]
 const O_NONBLOCK: i32 = 0x4;
 
+/// `O_NOFOLLOW`, where its value is known here: the path opened is canonical,
+/// so its last component is no link; one swapped in between the check and the
+/// open makes the open fail instead of being followed. (A swapped directory
+/// higher up is not caught: that would need openat2's RESOLVE_BENEATH.)
+#[cfg(all(any(target_os = "linux", target_os = "android"), any(target_arch = "x86_64", target_arch = "x86", target_arch = "riscv64")))]
+const O_NOFOLLOW: i32 = 0o400000;
+#[cfg(all(any(target_os = "linux", target_os = "android"), any(target_arch = "aarch64", target_arch = "arm")))]
+const O_NOFOLLOW: i32 = 0o100000;
+#[cfg(any(target_os = "macos", target_os = "ios", target_os = "freebsd"))]
+const O_NOFOLLOW: i32 = 0x100;
+#[cfg(not(any(
+    all(any(target_os = "linux", target_os = "android"), any(target_arch = "x86_64", target_arch = "x86", target_arch = "riscv64", target_arch = "aarch64", target_arch = "arm")),
+    target_os = "macos",
+    target_os = "ios",
+    target_os = "freebsd"
+)))]
+#[allow(dead_code)]
+const O_NOFOLLOW: i32 = 0;
+
 fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
     let mut o = std::fs::OpenOptions::new();
     o.read(true);
@@ -199,7 +220,7 @@ fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
     ))]
     {
         use std::os::unix::fs::OpenOptionsExt;
-        o.custom_flags(O_NONBLOCK);
+        o.custom_flags(O_NONBLOCK | O_NOFOLLOW);
     }
     o.open(path)
 }
