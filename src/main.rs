@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use rothray_engine::{render, render_raw, Aov, Part, RenderScene, RenderSettings, Split};
-use rothray_io::{load_scene, SceneFile};
+use rothray_io::{load_scene_with, SceneFile};
 
 #[derive(Parser)]
 #[command(name = "rothray", version, about = "Ray traces CSG solids by Roth's method")]
@@ -27,17 +27,25 @@ enum AovArg {
     Id,
 }
 
+/// Largest `--spp`, and largest number of camera samples in one render: bounds
+/// so that a typo or a hostile job cannot ask for a render of days (2^32
+/// samples is about 7 minutes at 10 Mrays/s).
+const MAX_SPP: u32 = 1024;
+const MAX_SAMPLES: u64 = 1 << 32;
+/// Largest `bench --repeats`.
+const MAX_REPEATS: u32 = 1000;
+
 /// Image size and sampling, shared by `render` and `bench`.
 #[derive(clap::Args, Clone, Copy)]
 struct ImageArgs {
-    /// Image width (default: the scene's).
-    #[arg(long)]
+    /// Image width, 1 to 65536 (default: the scene's).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
     width: Option<u32>,
-    /// Image height (default: the scene's).
-    #[arg(long)]
+    /// Image height, 1 to 65536 (default: the scene's). At most 2^28 pixels.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
     height: Option<u32>,
-    /// Samples per pixel (jittered when > 1).
-    #[arg(long, default_value_t = 1)]
+    /// Samples per pixel, 1 to 1024 (jittered when > 1); at most 2^32 samples a render.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=MAX_SPP as i64))]
     spp: u32,
 }
 
@@ -80,6 +88,22 @@ fn parse_range(s: &str) -> Result<(usize, Option<usize>), String> {
     Ok((a, b))
 }
 
+/// Which files a scene may read besides those in its own folder.
+#[derive(clap::Args, Clone, Default)]
+struct FileArgs {
+    /// Also allow the files a scene (or mesh) names to lie inside DIR; repeatable.
+    /// By default a scene reads only files inside its own folder (after `..` and
+    /// symbolic links are resolved), like POV-Ray's file I/O restrictions.
+    #[arg(long = "allow-path", value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
+}
+
+impl FileArgs {
+    fn options(&self) -> rothray_io::LoadOptions {
+        rothray_io::LoadOptions { allow_paths: self.allow_path.clone() }
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Render a scene to a PNG (or, with --tile, one part of it for `rothray merge`).
@@ -91,6 +115,8 @@ enum Cmd {
         output: PathBuf,
         #[command(flatten)]
         image: ImageArgs,
+        #[command(flatten)]
+        files: FileArgs,
         /// What to draw.
         #[arg(long, value_enum, default_value = "shaded")]
         aov: AovArg,
@@ -133,6 +159,8 @@ enum Cmd {
         /// whole file's output.
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         range: Option<(usize, Option<usize>)>,
+        #[command(flatten)]
+        files: FileArgs,
     },
     /// Bake once, render repeatedly, report times.
     Bench {
@@ -140,8 +168,10 @@ enum Cmd {
         scene: PathBuf,
         #[command(flatten)]
         image: ImageArgs,
-        /// Number of timed renders (the median is reported).
-        #[arg(long, default_value_t = 7)]
+        #[command(flatten)]
+        files: FileArgs,
+        /// Number of timed renders, 1 to 1000 (the median is reported).
+        #[arg(long, default_value_t = 7, value_parser = clap::value_parser!(u32).range(1..=MAX_REPEATS as i64))]
         repeats: u32,
         /// Trace camera rays only (no shadow rays), like POV-Ray at +Q0.
         #[arg(long)]
@@ -172,6 +202,8 @@ enum Cmd {
         /// Print the report as one JSON object.
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        files: FileArgs,
     },
 }
 
@@ -202,8 +234,8 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(path: &Path) -> Result<(SceneFile, RenderScene, Duration)> {
-    let sf = load_scene(path).map_err(|e| BadInput(e.to_string()))?;
+fn load(path: &Path, files: &FileArgs) -> Result<(SceneFile, RenderScene, Duration)> {
+    let sf = load_scene_with(path, &files.options()).map_err(|e| BadInput(e.to_string()))?;
     for w in &sf.warnings {
         eprintln!("warning: {w}");
     }
@@ -222,8 +254,12 @@ fn settings(sf: &SceneFile, img: ImageArgs, aov: Aov) -> Result<RenderSettings> 
     if (w as u64) * (h as u64) > 1 << 28 {
         return Err(BadInput(format!("image size {w}x{h} has more than 2^28 pixels")).into());
     }
-    if spp == 0 || spp > 65536 {
-        return Err(BadInput(format!("--spp {spp} is out of range (1..65536)")).into());
+    if spp == 0 || spp > MAX_SPP {
+        return Err(BadInput(format!("--spp {spp} is out of range (1..={MAX_SPP})")).into());
+    }
+    let samples = (w as u64) * (h as u64) * (spp as u64);
+    if samples > MAX_SAMPLES {
+        return Err(BadInput(format!("{w}x{h} at {spp} spp is {samples} samples, more than 2^32 in one render")).into());
     }
     Ok(RenderSettings { width: w, height: h, spp, aov, background: sf.background, lights: sf.lights.clone(), ambient: 0.1, part: Part::WHOLE })
 }
@@ -283,8 +319,8 @@ impl Progress {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
-        Cmd::Render { scene, output, image, aov, tile, split } => {
-            let (sf, rs, _) = load(&scene)?;
+        Cmd::Render { scene, output, image, aov, tile, split, files } => {
+            let (sf, rs, _) = load(&scene, &files)?;
             let aov = match aov {
                 AovArg::Shaded => Aov::Shaded,
                 AovArg::Depth => Aov::Depth,
@@ -325,10 +361,11 @@ fn run(cli: Cli) -> Result<()> {
             .with_context(|| format!("cannot write {}", output.display()))?;
             Ok(())
         }
-        Cmd::Trace { scene, rays, output, all, range } => {
-            let (_sf, rs, _) = load(&scene)?;
-            let text = std::fs::read_to_string(&rays)
-                .map_err(|e| BadInput(format!("{}: cannot read: {e}", rays.display())))?;
+        Cmd::Trace { scene, rays, output, all, range, files } => {
+            // The ray file first: a bad one fails before a long load. Only a regular
+            // file is read (a FIFO would block for ever).
+            let text = rothray_io::files::read_user_text(&rays).map_err(|e| BadInput(e.to_string()))?;
+            let (_sf, rs, _) = load(&scene, &files)?;
             let lines = rothray_io::rays::parse_rays(&text);
             let (first, end) = match range {
                 None => (0, lines.len()),
@@ -396,12 +433,13 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Cmd::Check { mesh, json } => check_mesh(&mesh, json),
-        Cmd::Bench { scene, image, repeats, json, tolerances, plot, .. } if !tolerances.is_empty() => {
-            bench_tolerances(&scene, image, repeats, &tolerances, plot.as_deref(), json)
+        Cmd::Check { mesh, json, files } => check_mesh(&mesh, json, &files),
+        Cmd::Bench { scene, image, repeats, json, tolerances, plot, files, .. } if !tolerances.is_empty() => {
+            let sf = load_scene_with(&scene, &files.options()).map_err(|e| BadInput(e.to_string()))?;
+            bench_tolerances(&sf, image, repeats, &tolerances, plot.as_deref(), json)
         }
-        Cmd::Bench { scene, image, repeats, json, no_shadows, tile, split, .. } => {
-            let (sf, rs, bake) = load(&scene)?;
+        Cmd::Bench { scene, image, repeats, json, no_shadows, tile, split, files, .. } => {
+            let (sf, rs, bake) = load(&scene, &files)?;
             let mut s = settings(&sf, image, Aov::Shaded)?;
             if let Some((index, count)) = tile {
                 s.part = Part { index, count, split: split_of(split) };
@@ -505,9 +543,11 @@ fn csv(s: &str) -> String {
     }
 }
 
-fn check_mesh(path: &Path, json: bool) -> Result<()> {
+fn check_mesh(path: &Path, json: bool, files: &FileArgs) -> Result<()> {
     use rothray_primitives::mesh::{InsideRule, MeshData};
-    let (pos, tris, warnings) = rothray_io::load_mesh(path).map_err(|e| BadInput(e.to_string()))?;
+    let bad = |e: rothray_io::MeshLoadError| BadInput(e.to_string());
+    let (real, allowed) = rothray_io::user_mesh(path, &files.options()).map_err(bad)?;
+    let (pos, tris, warnings) = rothray_io::load_mesh_in(&real, &allowed).map_err(bad)?;
     for w in &warnings {
         eprintln!("warning: {w}");
     }
@@ -564,7 +604,7 @@ fn check_mesh(path: &Path, json: bool) -> Result<()> {
 
 /// `bench --tolerances`: run time against error for the solver tolerance.
 fn bench_tolerances(
-    scene: &Path,
+    sf: &SceneFile,
     image: ImageArgs,
     repeats: u32,
     tols: &[f32],
@@ -572,9 +612,9 @@ fn bench_tolerances(
     json: bool,
 ) -> Result<()> {
     use rothray_engine::{bake_scene, Ray};
-    let sf = load_scene(scene).map_err(|e| BadInput(e.to_string()))?;
+    let scene = sf.path.as_path();
     // One sample per pixel: the error is measured per camera ray.
-    let s = settings(&sf, ImageArgs { spp: 1, ..image }, Aov::Depth)?;
+    let s = settings(sf, ImageArgs { spp: 1, ..image }, Aov::Depth)?;
     for &t in tols {
         if !(t.is_finite() && t > 0.0) {
             return Err(BadInput(format!("--tolerances: {t} is not a positive number")).into());

@@ -7,6 +7,7 @@ mod bad_input;
 mod cli;
 mod coincident;
 mod csg_oracle;
+mod hostile;
 mod leaf_oracle;
 mod oracle;
 mod povray;

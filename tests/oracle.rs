@@ -271,7 +271,10 @@ pub fn scene_json(objects: &[Shape]) -> String {
 }
 
 pub fn bake(objects: &[Shape]) -> RenderScene {
-    let sf = rothray::io::parse_scene(&scene_json(objects), std::path::Path::new("test.json")).expect("scene parses");
+    // The random meshes are written to the temporary folder, outside the
+    // (nominal) scene's folder: allow it, as a user would with --allow-path.
+    let opts = rothray::io::LoadOptions { allow_paths: vec![std::env::temp_dir()] };
+    let sf = rothray::io::parse_scene_with(&scene_json(objects), std::path::Path::new("test.json"), &opts).expect("scene parses");
     RenderScene::from_world(&sf.world).expect("scene bakes")
 }
 

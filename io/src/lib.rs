@@ -5,16 +5,23 @@
 //! * [`mesh`]: OBJ (tobj) and glTF 2.0 (.gltf / .glb) import of closed meshes;
 //! * [`rays`]: the `rothray trace` ray CSV;
 //! * [`part`]: part files of a split render and their merge;
+//! * [`files`]: which files a scene may read (its folder and `--allow-path`
+//!   folders; regular files only), and the record of what a load opened;
 //! * [`write_png`]: images.
 #![warn(missing_docs)]
 
+pub mod files;
+pub mod json;
+pub mod json_path;
 pub mod mesh;
 pub mod part;
+pub mod polygon;
 pub mod rays;
 pub mod scene;
 
-pub use mesh::{load_mesh, load_mesh_data, MeshLoadError};
-pub use scene::{load_scene, parse_scene, SceneError, SceneFile};
+pub use files::{FileError, Files, LoadOptions};
+pub use mesh::{load_mesh, load_mesh_data, load_mesh_data_in, load_mesh_in, user_mesh, MeshLoadError};
+pub use scene::{load_scene, load_scene_recorded, load_scene_with, parse_scene, parse_scene_with, SceneError, SceneFile};
 
 /// Writes an RGB8 image as PNG.
 pub fn write_png(path: &std::path::Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), image::ImageError> {

@@ -13,6 +13,9 @@ use base64::Engine as _;
 use glam::{DMat4, DVec3, Vec3};
 use rothray_primitives::mesh::{InsideRule, MeshData, MeshError};
 
+use crate::files::{FileError, Files, LoadOptions};
+use crate::polygon;
+
 /// At most this many triangles (and vertices) after instancing: a hostile glTF can
 /// reference one mesh from many nodes.
 pub const MAX_TRIANGLES: usize = 1 << 26;
@@ -29,6 +32,14 @@ pub enum MeshLoadError {
         path: PathBuf,
         /// Cause.
         source: std::io::Error,
+    },
+    /// The file, or a file it names, is outside the allowed folders or not a
+    /// regular file (see [`crate::files`]); it was not opened.
+    #[error("{source}")]
+    File {
+        /// Why.
+        #[from]
+        source: FileError,
     },
     /// Not `.obj`, `.gltf` or `.glb`.
     #[error("{path}: unknown mesh format (expected .obj, .gltf or .glb)")]
@@ -122,13 +133,47 @@ pub enum MeshLoadError {
 pub type LoadedMesh = (Vec<Vec3>, Vec<[u32; 3]>, Vec<String>);
 
 /// Loads every triangle of an `.obj`, `.gltf` or `.glb` file (chosen by extension).
+/// The files it names (glTF buffers) must lie in the mesh's own folder: see
+/// [`load_mesh_in`] to allow others.
 pub fn load_mesh(path: &Path) -> Result<LoadedMesh, MeshLoadError> {
+    let (path, files) = user_mesh(path, &LoadOptions::default())?;
+    load_mesh_in(&path, &files)
+}
+
+/// The mesh named on the command line (`rothray check MESH`): canonical, so that
+/// its folder, where its buffers must lie, is the real one and not a link's; and
+/// the [`Files`] that confine what it names to that folder and `opts.allow_paths`.
+pub fn user_mesh(path: &Path, opts: &LoadOptions) -> Result<(PathBuf, Files), MeshLoadError> {
+    let real = std::fs::canonicalize(path).map_err(|source| MeshLoadError::Io { path: path.into(), source })?;
+    let files = Files::new(real.parent().unwrap_or(Path::new("/")), opts);
+    Ok((real, files))
+}
+
+/// [`load_mesh`], reading only what `files` allows (the mesh file itself too);
+/// `files` records what was opened.
+pub fn load_mesh_in(path: &Path, files: &Files) -> Result<LoadedMesh, MeshLoadError> {
+    // The last line of defence only: every input is meant to end in a typed
+    // error; a panic in a reader (ours or a dependency's) becomes a located one.
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_mesh_unguarded(path, files))).unwrap_or_else(|_| {
+        Err(MeshLoadError::Malformed {
+            path: path.into(),
+            place: "(unknown)".into(),
+            message: "the mesh reader crashed (a bug: please report this file)".into(),
+        })
+    })
+}
+
+fn load_mesh_unguarded(path: &Path, files: &Files) -> Result<LoadedMesh, MeshLoadError> {
     let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
-    let bytes = std::fs::read(path).map_err(|source| MeshLoadError::Io { path: path.into(), source })?;
+    // The format is known from the name before anything is opened: a file that is
+    // not a mesh is never read (and so never quoted in a message).
+    if !matches!(ext.as_deref(), Some("obj" | "gltf" | "glb")) {
+        return Err(MeshLoadError::UnknownFormat { path: path.into() });
+    }
+    let bytes = files.read(path).map_err(|source| MeshLoadError::File { source })?;
     let r = match ext.as_deref() {
         Some("obj") => load_obj(path, &bytes)?,
-        Some("gltf") | Some("glb") => load_gltf(path, &bytes)?,
-        _ => return Err(MeshLoadError::UnknownFormat { path: path.into() }),
+        _ => load_gltf(path, &bytes, files)?,
     };
     if r.1.is_empty() {
         return Err(MeshLoadError::Empty { path: path.into() });
@@ -139,7 +184,13 @@ pub fn load_mesh(path: &Path) -> Result<LoadedMesh, MeshLoadError> {
 /// [`load_mesh`] then [`MeshData::new`]; the warnings of both are returned (also
 /// kept in [`MeshData::warnings`] for the second).
 pub fn load_mesh_data(path: &Path, rule: InsideRule) -> Result<(MeshData, Vec<String>), MeshLoadError> {
-    let (pos, tris, mut warnings) = load_mesh(path)?;
+    let (path, files) = user_mesh(path, &LoadOptions::default())?;
+    load_mesh_data_in(&path, rule, &files)
+}
+
+/// [`load_mesh_in`] then [`MeshData::new`].
+pub fn load_mesh_data_in(path: &Path, rule: InsideRule, files: &Files) -> Result<(MeshData, Vec<String>), MeshLoadError> {
+    let (pos, tris, mut warnings) = load_mesh_in(path, files)?;
     let m = MeshData::new(pos, tris, rule).map_err(|source| MeshLoadError::Mesh { path: path.into(), source })?;
     warnings.extend(m.warnings().iter().cloned());
     Ok((m, warnings))
@@ -160,14 +211,24 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     // tobj reports no line numbers: a pre-scan counts what it skips and, on an
     // error, finds the line (see `locate_obj_error`).
     let mut skipped = (0usize, 0usize);
-    for l in text.lines() {
-        match l.split_whitespace().next() {
+    // Lines of the faces tobj keeps (3 or more vertices), in order: tobj's faces
+    // come out in file order, so the k-th is on face_lines[k].
+    let mut face_lines: Vec<usize> = Vec::new();
+    let mut short_faces: Vec<usize> = Vec::new();
+    for (i, l) in text.lines().enumerate() {
+        let mut w = l.split_whitespace();
+        match w.next() {
             Some("p") => skipped.0 += 1,
             Some("l") => skipped.1 += 1,
+            Some("f") => match w.count() {
+                0..=2 => short_faces.push(i + 1),
+                _ => face_lines.push(i + 1),
+            },
             _ => {}
         }
     }
-    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
+    // Faces are triangulated here, not by tobj: see `polygon`.
+    let opts = tobj::LoadOptions { triangulate: false, single_index: false, ignore_points: true, ignore_lines: true };
     let (models, _materials) =
         tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &opts, |_| Err(tobj::LoadError::OpenFileFailed))
             .map_err(|e| {
@@ -181,6 +242,20 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     if skipped.0 > 0 || skipped.1 > 0 {
         warnings.push(format!("{}: skipped {} point and {} line elements", path.display(), skipped.0, skipped.1));
     }
+    // A face of one or two vertices bounds nothing: skipped, like `l` lines, and
+    // said so with its line (the first few, then a count).
+    if !short_faces.is_empty() {
+        let shown: Vec<String> = short_faces.iter().take(5).map(|l| l.to_string()).collect();
+        let more = if short_faces.len() > 5 { format!(" and {} more", short_faces.len() - 5) } else { String::new() };
+        warnings.push(format!(
+            "{}: line {}{more}: skipped {} face(s) with fewer than 3 vertices",
+            path.display(),
+            shown.join(", "),
+            short_faces.len()
+        ));
+    }
+    let mut forced: Vec<String> = Vec::new();
+    let mut face_no = 0usize;
     let mut pos: Vec<Vec3> = vec![];
     let mut tris: Vec<[u32; 3]> = vec![];
     for m in &models {
@@ -201,19 +276,49 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
             pos.push(v);
         }
         let n = mesh.positions.len() / 3;
-        for t in mesh.indices.chunks_exact(3) {
-            for &k in t {
-                if k as usize >= n {
-                    return Err(MeshLoadError::IndexOutOfRange {
-                        path: path.into(),
-                        place: format!("object {:?}", m.name),
-                        index: k as u64,
-                        count: n,
-                    });
-                }
-            }
-            tris.push([t[0] + base as u32, t[1] + base as u32, t[2] + base as u32]);
+        if let Some(&k) = mesh.indices.iter().find(|&&k| k as usize >= n) {
+            return Err(MeshLoadError::IndexOutOfRange {
+                path: path.into(),
+                place: format!("object {:?}", m.name),
+                index: k as u64,
+                count: n,
+            });
         }
+        // face_arities is empty when every face is a triangle.
+        let all_tris;
+        let arities: &[u32] = if mesh.face_arities.is_empty() {
+            all_tris = vec![3u32; mesh.indices.len() / 3];
+            &all_tris
+        } else {
+            &mesh.face_arities
+        };
+        let local = &pos[base..];
+        let mut at = 0usize;
+        let mut face_tris = Vec::new();
+        for &a in arities {
+            let a = a as usize;
+            let Some(face) = mesh.indices.get(at..at + a) else { break };
+            at += a;
+            face_tris.clear();
+            if polygon::triangulate(local, face, &mut face_tris) == polygon::Method::Forced {
+                let line = face_lines.get(face_no).map_or_else(|| format!("face {face_no}"), |l| format!("line {l}"));
+                forced.push(format!("{line} ({a} vertices)"));
+            }
+            face_no += 1;
+            if tris.len() + face_tris.len() > MAX_TRIANGLES {
+                return Err(MeshLoadError::TooLarge { path: path.into() });
+            }
+            tris.extend(face_tris.iter().map(|t| t.map(|k| k + base as u32)));
+        }
+    }
+    if !forced.is_empty() {
+        let more = if forced.len() > 5 { format!(" and {} more", forced.len() - 5) } else { String::new() };
+        warnings.push(format!(
+            "{}: {}{more}: non-convex face(s) too large to ear-clip (more than {} vertices) or not simple, split by halving; triangles may lie outside the face",
+            path.display(),
+            forced.iter().take(5).cloned().collect::<Vec<_>>().join(", "),
+            polygon::MAX_EAR_CLIP
+        ));
     }
     Ok((pos, tris, warnings))
 }
@@ -314,6 +419,7 @@ const HARMLESS_EXTENSIONS: &[&str] = &[
 
 struct GltfCtx<'a> {
     path: &'a Path,
+    files: &'a Files,
     doc: &'a gltf::Document,
     blob: Option<&'a [u8]>,
     buffers: Vec<Option<Vec<u8>>>,
@@ -322,7 +428,7 @@ struct GltfCtx<'a> {
     warnings: Vec<String>,
 }
 
-fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
+fn load_gltf(path: &Path, bytes: &[u8], files: &Files) -> Result<LoadedMesh, MeshLoadError> {
     let malformed = |place: &str, message: String| MeshLoadError::Malformed {
         path: path.into(),
         place: place.into(),
@@ -364,6 +470,7 @@ fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     {
         use gltf::json::validation::{Error as VError, Validate};
         let root = g.document.as_json();
+        check_mesh_accessor_indices(path, root)?;
         let mut errors = Vec::new();
         root.validate(root, gltf::json::Path::new, &mut |path, error| errors.push((path(), error)));
         errors.retain(|(p, e)| !(*e == VError::Missing && (p.as_str().ends_with(".min") || p.as_str().ends_with(".max"))));
@@ -374,6 +481,7 @@ fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     let doc = &g.document;
     let mut ctx = GltfCtx {
         path,
+        files,
         doc,
         blob: g.blob.as_deref(),
         buffers: vec![None; doc.buffers().len()],
@@ -410,6 +518,46 @@ fn load_gltf(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
         }
     }
     Ok((ctx.pos, ctx.tris, ctx.warnings))
+}
+
+/// gltf-json's own validation indexes `accessors` with a primitive's POSITION
+/// index unchecked (gltf-json 1.4.1, mesh.rs: `&root.accessors[...]`), so a file
+/// with `"POSITION": 99` panics inside it. Every accessor index of every
+/// primitive (attributes, indices, morph targets) is checked here first.
+fn check_mesh_accessor_indices(path: &Path, root: &gltf::json::Root) -> Result<(), MeshLoadError> {
+    let n = root.accessors.len();
+    let bad = |place: String, index: usize| MeshLoadError::Malformed {
+        path: path.into(),
+        place,
+        message: format!("accessor {index} does not exist ({n} accessors)"),
+    };
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            let place = format!("JSON at meshes[{mi}].primitives[{pi}]");
+            for (sem, a) in &prim.attributes {
+                if a.value() >= n {
+                    let name = match sem {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".into(),
+                    };
+                    return Err(bad(format!("{place}.attributes.{name}"), a.value()));
+                }
+            }
+            if let Some(a) = &prim.indices {
+                if a.value() >= n {
+                    return Err(bad(format!("{place}.indices"), a.value()));
+                }
+            }
+            for (ti, t) in prim.targets.iter().flatten().enumerate() {
+                for (k, a) in [("POSITION", &t.positions), ("NORMAL", &t.normals), ("TANGENT", &t.tangents)] {
+                    if let Some(a) = a.filter(|a| a.value() >= n) {
+                        return Err(bad(format!("{place}.targets[{ti}].{k}"), a.value()));
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `asset.version` of a .gltf (glTF 1.0 files fail to parse as 2.0 with a confusing message).
@@ -665,8 +813,9 @@ impl GltfCtx<'_> {
                         what: format!("buffer URI {uri:?} (only relative files and data URIs)"),
                     });
                 } else {
+                    // Decoded first, so that `..%2F` is a `..` that the folder check sees.
                     let file = self.path.parent().unwrap_or(Path::new(".")).join(percent_decode(uri));
-                    std::fs::read(&file).map_err(|e| missing(format!("cannot read {}: {e}", file.display())))?
+                    self.files.read_prefix(&file, buffer.length() as u64).map_err(|e| missing(e.to_string()))?
                 }
             }
         };

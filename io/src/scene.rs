@@ -13,7 +13,10 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use rothray_primitives::LeafShape;
 use serde::Deserialize;
-use serde_json::{Map, Value};
+use crate::json::{Map, Value};
+
+use crate::json_path::At;
+use crate::files::{read_user_text, FileError, Files, LoadOptions};
 
 /// A scene file, loaded: settings plus a World holding its solids.
 pub struct SceneFile {
@@ -37,6 +40,9 @@ pub struct SceneFile {
     pub objects: Vec<Entity>,
     /// Warnings (e.g. from mesh import).
     pub warnings: Vec<String>,
+    /// Every file the load opened (canonical), the scene file first: the record
+    /// that shows no file outside the allowed folders was touched.
+    pub files_read: Vec<PathBuf>,
 }
 
 /// A scene that could not be loaded.
@@ -49,6 +55,14 @@ pub enum SceneError {
         file: String,
         /// Cause.
         source: std::io::Error,
+    },
+    /// The scene file is not a regular file or cannot be read.
+    #[error("{source}")]
+    File {
+        /// File.
+        file: String,
+        /// Why.
+        source: FileError,
     },
     /// Not JSON.
     #[error("{file}:{line}:{column}: invalid JSON: {message}")]
@@ -77,6 +91,7 @@ pub enum SceneError {
 struct Ctx<'a> {
     file: String,
     dir: &'a Path,
+    files: &'a Files,
     world: World,
     names: std::collections::HashSet<String>,
     warnings: Vec<String>,
@@ -85,55 +100,85 @@ struct Ctx<'a> {
 
 type R<T> = Result<T, SceneError>;
 
-impl Ctx<'_> {
-    fn err<T>(&self, at: &str, message: impl Into<String>) -> R<T> {
-        Err(SceneError::Invalid { file: self.file.clone(), at: at.to_string(), message: message.into() })
+/// A place for an error: a spelled-out path (`&str`, near the leaves) or an
+/// implicit one ([`At`], while descending the shape tree).
+trait Loc {
+    fn render(&self) -> String;
+}
+impl Loc for str {
+    fn render(&self) -> String {
+        self.to_string()
     }
-    fn obj<'v>(&self, v: &'v Value, at: &str) -> R<&'v Map<String, Value>> {
+}
+impl Loc for String {
+    fn render(&self) -> String {
+        self.clone()
+    }
+}
+/// `parent.key`, spelled out only for an error (a leaf's fields are read on
+/// every leaf; their paths are wanted on almost none).
+struct Sub<'a>(&'a str, &'a str);
+impl Loc for Sub<'_> {
+    fn render(&self) -> String {
+        join(self.0, self.1)
+    }
+}
+impl Loc for At<'_> {
+    fn render(&self) -> String {
+        At::render(self)
+    }
+}
+
+impl Ctx<'_> {
+    fn err<T>(&self, at: &(impl Loc + ?Sized), message: impl Into<String>) -> R<T> {
+        Err(SceneError::Invalid { file: self.file.clone(), at: at.render(), message: message.into() })
+    }
+    fn obj<'v>(&self, v: &'v Value, at: &(impl Loc + ?Sized)) -> R<&'v Map> {
         match v.as_object() {
             Some(m) => Ok(m),
             None => self.err(at, format!("expected an object, got {}", kind_of(v))),
         }
     }
-    fn keys(&self, m: &Map<String, Value>, at: &str, allowed: &[&str], required: &[&str]) -> R<()> {
+    fn keys(&self, m: &Map, at: &(impl Loc + ?Sized), allowed: &[&str], required: &[&str]) -> R<()> {
         for k in m.keys() {
-            if !allowed.contains(&k.as_str()) {
-                return self.err(&join(at, k), format!("unknown key `{k}` (expected one of: {})", allowed.join(", ")));
+            if !allowed.contains(&k) {
+                return self.err(&join(&at.render(), k), format!("unknown key `{k}` (expected one of: {})", allowed.join(", ")));
             }
         }
         for r in required {
-            if !m.contains_key(*r) {
+            if !m.contains_key(r) {
                 return self.err(at, format!("missing field `{r}`"));
             }
         }
         Ok(())
     }
-    fn num(&self, v: &Value, at: &str) -> R<f64> {
+    fn num(&self, v: &Value, at: &(impl Loc + ?Sized)) -> R<f64> {
         match v.as_f64() {
-            Some(x) if x.is_finite() && (x.abs() <= f32::MAX as f64) => Ok(x),
+            Some(x) if finite_f32(v).is_some() => Ok(x),
             Some(x) => self.err(at, format!("number {x} is not finite in f32")),
             None => self.err(at, format!("expected a number, got {}", kind_of(v))),
         }
     }
-    fn vec3(&self, v: &Value, at: &str) -> R<DVec3> {
+    fn vec3(&self, v: &Value, at: &(impl Loc + ?Sized)) -> R<DVec3> {
+        // The element's place is spelled out only for an error.
+        let num = |k: usize| self.num(&v[k], &format!("{}[{k}]", at.render()));
         match v.as_array() {
-            Some(a) if a.len() == 3 => Ok(DVec3::new(
-                self.num(&a[0], &format!("{at}[0]"))?,
-                self.num(&a[1], &format!("{at}[1]"))?,
-                self.num(&a[2], &format!("{at}[2]"))?,
-            )),
+            Some([x, y, z]) => match (finite_f32(x), finite_f32(y), finite_f32(z)) {
+                (Some(x), Some(y), Some(z)) => Ok(DVec3::new(x, y, z)),
+                _ => Ok(DVec3::new(num(0)?, num(1)?, num(2)?)),
+            },
             Some(a) => self.err(at, format!("expected an array of 3 numbers, got {} elements", a.len())),
             None => self.err(at, format!("expected an array of 3 numbers, got {}", kind_of(v))),
         }
     }
-    fn color(&self, v: &Value, at: &str) -> R<Vec3> {
+    fn color(&self, v: &Value, at: &(impl Loc + ?Sized)) -> R<Vec3> {
         let c = self.vec3(v, at)?;
         if c.min_element() < 0.0 {
             return self.err(at, "colour components must be >= 0");
         }
         Ok(c.as_vec3())
     }
-    fn name(&mut self, v: &Value, at: &str) -> R<String> {
+    fn name(&mut self, v: &Value, at: &(impl Loc + ?Sized)) -> R<String> {
         let Some(s) = v.as_str() else { return self.err(at, format!("expected a string, got {}", kind_of(v))) };
         if s.is_empty() {
             return self.err(at, "name is empty");
@@ -143,6 +188,11 @@ impl Ctx<'_> {
         }
         Ok(s.to_string())
     }
+}
+
+/// The number, if it is one and finite in f32.
+fn finite_f32(v: &Value) -> Option<f64> {
+    v.as_f64().filter(|x| x.is_finite() && x.abs() <= f32::MAX as f64)
 }
 
 fn join(at: &str, k: &str) -> String {
@@ -164,55 +214,113 @@ const LEAF_KINDS: &[&str] =
     &["sphere", "box", "cylinder", "cone", "torus", "plane", "swept_sphere", "generalized_cylinder", "mesh"];
 const NODE_KINDS: &[&str] = &["union", "intersection", "difference", "transformed"];
 
-/// Loads a scene file (mesh paths are relative to it). Runs on a thread with a
-/// large stack so that deeply nested scenes (10 000 levels) parse.
+/// Loads a scene file (mesh paths are relative to it); the files it names must
+/// lie in its folder (see [`load_scene_with`] to allow others). Runs on a thread
+/// with a large stack so that deeply nested scenes (100 000 levels) parse.
 pub fn load_scene(path: &Path) -> Result<SceneFile, SceneError> {
-    let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { file: file.clone(), source })?;
-    parse_scene(&text, path)
+    load_scene_with(path, &LoadOptions::default())
 }
 
-/// Parses scene text; `path` names the file in errors and anchors relative mesh paths.
+/// [`load_scene`] with options: the folders, besides the scene's own, that the
+/// files it names may lie in.
+pub fn load_scene_with(path: &Path, opts: &LoadOptions) -> Result<SceneFile, SceneError> {
+    load_scene_recorded(path, opts).0
+}
+
+/// [`load_scene_with`], plus every file the load opened (canonical), whether it
+/// succeeded or not: the record that shows what a scene made the loader read.
+pub fn load_scene_recorded(path: &Path, opts: &LoadOptions) -> (Result<SceneFile, SceneError>, Vec<PathBuf>) {
+    let file = path.display().to_string();
+    let text = match read_user_text(path) {
+        Ok(t) => t,
+        Err(e) => return (Err(SceneError::File { file, source: e }), Vec::new()),
+    };
+    let (dir, files) = scene_files(path, opts);
+    let mut opened: Vec<PathBuf> = std::fs::canonicalize(path).into_iter().collect();
+    let r = parse_scene_in(&text, path, &dir, &files).map(|mut sf| {
+        sf.files_read.splice(0..0, opened.iter().cloned());
+        sf
+    });
+    opened.extend(files.opened());
+    (r, opened)
+}
+
+/// Parses scene text; `path` names the file in errors and anchors relative mesh
+/// paths, which must lie in its folder.
 pub fn parse_scene(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
+    parse_scene_with(text, path, &LoadOptions::default())
+}
+
+/// [`parse_scene`] with options (see [`load_scene_with`]).
+pub fn parse_scene_with(text: &str, path: &Path, opts: &LoadOptions) -> Result<SceneFile, SceneError> {
+    let (dir, files) = scene_files(path, opts);
+    parse_scene_in(text, path, &dir, &files)
+}
+
+/// The scene's real folder and the files it may read. Mesh paths are relative
+/// to the real file that names them, and a link to a scene must not widen what
+/// that scene may read.
+fn scene_files(path: &Path, opts: &LoadOptions) -> (PathBuf, Files) {
+    let dir = match std::fs::canonicalize(path) {
+        Ok(real) => real.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("/")),
+        Err(_) => path.parent().map(Path::to_path_buf).unwrap_or_default(),
+    };
+    let files = Files::new(&dir, opts);
+    (dir, files)
+}
+
+fn parse_scene_in(text: &str, path: &Path, dir: &Path, files: &Files) -> Result<SceneFile, SceneError> {
     // Deep nesting recurses: parse on a thread with a large stack (address space
     // only; pages are touched as used). If the system refuses that much, try less.
+    let crashed = || SceneError::Invalid {
+        file: path.display().to_string(),
+        at: "(unknown)".into(),
+        message: "the parser crashed (a bug: please report this scene)".into(),
+    };
+    let run = |text: &str, dir: &Path| {
+        // The last line of defence only: every input is meant to end in a typed
+        // error; a panic that escapes anyway becomes a located one, not a crash.
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| parse_scene_inner(text, path, dir, files)))
+            .unwrap_or_else(|_| Err(crashed()))
+    };
     for stack in [1usize << 30, 1 << 26] {
-        let (t, p) = (text.to_string(), path.to_path_buf());
-        let spawned =
-            std::thread::Builder::new().name("scene-parse".into()).stack_size(stack).spawn(move || parse_scene_inner(&t, &p));
-        if let Ok(h) = spawned {
-            return h.join().unwrap_or_else(|_| {
-                Err(SceneError::Invalid {
-                    file: path.display().to_string(),
-                    at: String::new(),
-                    message: "the parser crashed (please report this scene)".into(),
-                })
-            });
+        let spawned = std::thread::scope(|sc| {
+            std::thread::Builder::new()
+                .name("scene-parse".into())
+                .stack_size(stack)
+                .spawn_scoped(sc, || run(text, dir))
+                .map(|h| h.join().unwrap_or_else(|_| Err(crashed())))
+        });
+        if let Ok(r) = spawned {
+            return r;
         }
     }
-    parse_scene_inner(text, path)
+    run(text, dir)
 }
 
-fn parse_scene_inner(text: &str, path: &Path) -> Result<SceneFile, SceneError> {
+fn parse_scene_inner(text: &str, path: &Path, dir: &Path, files: &Files) -> Result<SceneFile, SceneError> {
     let file = path.display().to_string();
     let mut de = serde_json::Deserializer::from_str(text);
     de.disable_recursion_limit();
     let root = Value::deserialize(&mut de)
         .and_then(|v| de.end().map(|_| v))
         .map_err(|e| SceneError::Json { file: file.clone(), line: e.line(), column: e.column(), message: e.to_string() })?;
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let mut cx = Ctx { file, dir, world: World::new(), names: Default::default(), warnings: Vec::new(), meshes: HashMap::new() };
+    let mut cx = Ctx { file, dir, files, world: World::new(), names: Default::default(), warnings: Vec::new(), meshes: HashMap::new() };
     let res = parse_root(&mut cx, &root, path);
     // Deep trees drop recursively: do it here, on the big stack.
     drop(root);
-    res
+    res.map(|mut sf| {
+        sf.files_read = files.opened();
+        sf
+    })
 }
 
 fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
-    let m = cx.obj(root, "")?.clone();
-    cx.keys(&m, "", &["name", "camera", "image", "background", "lights", "objects"], &["camera", "objects"])?;
+    // Borrowed, not cloned: a clone doubled the memory of a large scene.
+    let m = cx.obj(root, "")?;
+    cx.keys(m, "", &["name", "camera", "image", "background", "lights", "objects"], &["camera", "objects"])?;
     let name = match m.get("name") {
-        Some(Value::String(s)) => Some(s.clone()),
+        Some(Value::String(s)) => Some(s.to_string()),
         Some(v) => return cx.err("name", format!("expected a string, got {}", kind_of(v))),
         None => None,
     };
@@ -303,7 +411,10 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
             Some(v) => Some(cx.color(v, &format!("{at}.color"))?),
             None => None,
         };
-        let e = parse_shape(cx, &om["shape"], &format!("{at}.shape"))?;
+        let root_at = At::root();
+        let objects_at = root_at.key("objects");
+        let obj_at = objects_at.index(i);
+        let e = parse_shape(cx, &om["shape"], &obj_at.key("shape"))?;
         // The object is its shape's root entity; give it the object's name and order.
         let leaf_name = cx.world.get::<&Name>(e).ok().map(|n| n.0.clone());
         let root = if leaf_name.is_some() && cx.world.get::<&CsgNode>(e).is_err() {
@@ -330,30 +441,31 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
         world,
         objects,
         warnings: std::mem::take(&mut cx.warnings),
+        files_read: Vec::new(),
     })
 }
 
-fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
+fn parse_shape(cx: &mut Ctx, v: &Value, at: &At) -> R<Entity> {
     let m = cx.obj(v, at)?;
-    let kinds: Vec<&String> = m.keys().filter(|k| k.as_str() != "name" && k.as_str() != "color").collect();
+    let kinds: Vec<&str> = m.keys().filter(|&k| k != "name" && k != "color").collect();
     if kinds.is_empty() {
         return cx.err(at, format!("missing the shape kind (one of: {}, {})", LEAF_KINDS.join(", "), NODE_KINDS.join(", ")));
     }
     if kinds.len() > 1 {
-        return cx.err(at, format!("more than one shape kind: {}", kinds.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")));
+        return cx.err(at, format!("more than one shape kind: {}", kinds.join(", ")));
     }
-    let kind = kinds[0].clone();
-    let kat = join(at, &kind);
+    let kind = kinds[0];
+    let kat = at.key(kind);
     let name = match m.get("name") {
-        Some(v) => Some(cx.name(v, &join(at, "name"))?),
+        Some(v) => Some(cx.name(v, &at.key("name"))?),
         None => None,
     };
     let color = match m.get("color") {
-        Some(v) => Some(cx.color(v, &join(at, "color"))?),
+        Some(v) => Some(cx.color(v, &at.key("color"))?),
         None => None,
     };
-    let body = &m[&kind];
-    let e = match kind.as_str() {
+    let body = &m[kind];
+    let e = match kind {
         "union" | "intersection" | "difference" => {
             let Some(arr) = body.as_array() else {
                 return cx.err(&kat, format!("expected an array of shapes, got {}", kind_of(body)));
@@ -363,9 +475,9 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
             }
             let mut children = Vec::with_capacity(arr.len());
             for (i, c) in arr.iter().enumerate() {
-                children.push(parse_shape(cx, c, &format!("{kat}[{i}]"))?);
+                children.push(parse_shape(cx, c, &kat.index(i))?);
             }
-            let op = match kind.as_str() {
+            let op = match kind {
                 "union" => Op::Union,
                 "intersection" => Op::Intersection,
                 _ => Op::Difference,
@@ -378,10 +490,10 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
             let t = if let Some(mv) = tm.get("matrix") {
                 for k in ["translate", "rotate_deg", "scale"] {
                     if tm.contains_key(k) {
-                        return cx.err(&join(&kat, k), "cannot be combined with `matrix`");
+                        return cx.err(&kat.key(k), "cannot be combined with `matrix`");
                     }
                 }
-                let mat = join(&kat, "matrix");
+                let mat = kat.key("matrix").render();
                 let Some(a) = mv.as_array() else { return cx.err(&mat, "expected an array of 16 numbers") };
                 if a.len() != 16 {
                     return cx.err(&mat, format!("expected 16 numbers, got {}", a.len()));
@@ -402,47 +514,52 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
                 Transform::from_mat4(m4)
             } else {
                 let tr = match tm.get("translate") {
-                    Some(v) => cx.vec3(v, &join(&kat, "translate"))?,
+                    Some(v) => cx.vec3(v, &kat.key("translate"))?,
                     None => DVec3::ZERO,
                 };
                 let rot = match tm.get("rotate_deg") {
-                    Some(v) => cx.vec3(v, &join(&kat, "rotate_deg"))?,
+                    Some(v) => cx.vec3(v, &kat.key("rotate_deg"))?,
                     None => DVec3::ZERO,
                 };
                 let sc = match tm.get("scale") {
-                    Some(v) if v.is_number() => DVec3::splat(cx.num(v, &join(&kat, "scale"))?),
-                    Some(v) => cx.vec3(v, &join(&kat, "scale"))?,
+                    Some(v) if v.is_number() => DVec3::splat(cx.num(v, &kat.key("scale"))?),
+                    Some(v) => cx.vec3(v, &kat.key("scale"))?,
                     None => DVec3::ONE,
                 };
                 if sc.x == 0.0 || sc.y == 0.0 || sc.z == 0.0 {
-                    return cx.err(&join(&kat, "scale"), "a zero scale makes the transform singular");
+                    return cx.err(&kat.key("scale"), "a zero scale makes the transform singular");
                 }
                 Transform::from_trs_deg(tr, rot, sc)
             };
-            let child = parse_shape(cx, &tm["shape"], &join(&kat, "shape"))?;
+            let child = parse_shape(cx, &tm["shape"], &kat.key("shape"))?;
             // A transformed node is a one-child union carrying the transform.
             cx.world.spawn((CsgNode::union([child]), t))
         }
-        // Leaves are named by their JSON path unless they have a `name` (set below).
+        // Leaves are named by their JSON path unless they have a `name` (set
+        // below); the path is spelled out here, once per leaf, elided when long.
         "swept_sphere" => {
+            let kat = kat.render();
             let desc = parse_sweep(cx, body, &kat)?;
-            cx.world.spawn((desc, Name::new(kat.clone())))
+            cx.world.spawn((desc, Name::new(kat)))
         }
         "generalized_cylinder" => {
+            let kat = kat.render();
             let desc = parse_gcyl(cx, body, &kat)?;
-            cx.world.spawn((desc, Name::new(kat.clone())))
+            cx.world.spawn((desc, Name::new(kat)))
         }
         "mesh" => {
+            let kat = kat.render();
             let m = parse_mesh(cx, body, &kat)?;
-            cx.world.spawn((MeshSolid(m), Name::new(kat.clone())))
+            cx.world.spawn((MeshSolid(m), Name::new(kat)))
         }
-        _ if LEAF_KINDS.contains(&kind.as_str()) => {
-            let shape = parse_leaf(cx, &kind, body, &kat)?;
+        _ if LEAF_KINDS.contains(&kind) => {
+            let kat = kat.render();
+            let shape = parse_leaf(cx, kind, body, &kat)?;
             if let Err(e) = shape.validate() {
                 let at = join(&kat, e.field);
                 return cx.err(&at, e.message);
             }
-            let path = Name::new(kat.clone());
+            let path = Name::new(kat);
             match shape {
                 LeafShape::Sphere(s) => cx.world.spawn((s, path)),
                 LeafShape::Cuboid(s) => cx.world.spawn((s, path)),
@@ -470,7 +587,7 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &str) -> R<Entity> {
 
 fn parse_leaf(cx: &mut Ctx, kind: &str, body: &Value, at: &str) -> R<LeafShape> {
     let m = cx.obj(body, at)?;
-    let f = |k: &str| join(at, k);
+    let f = |k: &'static str| Sub(at, k);
     Ok(match kind {
         "sphere" => {
             cx.keys(m, at, &["center", "radius"], &["center", "radius"])?;
@@ -570,8 +687,8 @@ fn parse_gcyl(cx: &mut Ctx, body: &Value, at: &str) -> R<GeneralizedCylinder> {
     };
     let frame = match m.get("frame") {
         None => Frame::RotationMinimizing,
-        Some(Value::String(f)) if f == "rotation_minimizing" => Frame::RotationMinimizing,
-        Some(Value::String(f)) if f == "frenet" => Frame::Frenet,
+        Some(Value::String(f)) if &**f == "rotation_minimizing" => Frame::RotationMinimizing,
+        Some(Value::String(f)) if &**f == "frenet" => Frame::Frenet,
         Some(v) => return cx.err(&join(at, "frame"), format!("expected \"frenet\" or \"rotation_minimizing\", got {v}")),
     };
     let normal = match m.get("normal") {
@@ -599,17 +716,22 @@ fn parse_mesh(cx: &mut Ctx, body: &Value, at: &str) -> R<Arc<MeshData>> {
     let Some(rel) = m["path"].as_str() else { return cx.err(&pat, "expected a string") };
     let winding = match m.get("inside") {
         None => false,
-        Some(Value::String(s)) if s == "orientation" => false,
-        Some(Value::String(s)) if s == "winding" => true,
+        Some(Value::String(s)) if &**s == "orientation" => false,
+        Some(Value::String(s)) if &**s == "winding" => true,
         Some(v) => return cx.err(&join(at, "inside"), format!("expected \"orientation\" or \"winding\", got {v}")),
     };
     let full = cx.dir.join(rel);
-    let key = (std::fs::canonicalize(&full).unwrap_or(full.clone()), winding);
+    // Checked here, before anything is opened, so that the message is located.
+    let real = match cx.files.resolve(&full) {
+        Ok(r) => r,
+        Err(e) => return cx.err(&pat, e.to_string()),
+    };
+    let key = (real, winding);
     if let Some(d) = cx.meshes.get(&key) {
         return Ok(d.clone());
     }
     let rule = if winding { InsideRule::Winding } else { InsideRule::Orientation };
-    match crate::mesh::load_mesh_data(&full, rule) {
+    match crate::mesh::load_mesh_data_in(&full, rule, cx.files) {
         Ok((data, warnings)) => {
             for w in warnings {
                 cx.warnings.push(format!("{}: {pat}: {w}", cx.file));
