@@ -145,9 +145,13 @@ fn enumerate(planes: &[Plane], clip: &Aabb) -> Aabb {
     // Margin: f32 leaf kernels round their crossings by a few ulps of the
     // coordinates involved; 1e-5 of the size plus 1e-6 of the distance from
     // the origin covers that with room to spare.
-    let size = (hi - lo).length();
-    let reach = lo.abs().max(hi.abs()).max_element().min(far);
-    let margin = 1e-5 * size.min(far) + 1e-6 * reach + 1e-30;
+    // Open sides (on the far box) do not count towards the size and reach.
+    let open_lo = lo.cmple(DVec3::splat(-0.5 * far));
+    let open_hi = hi.cmpge(DVec3::splat(0.5 * far));
+    let (flo, fhi) = (DVec3::select(open_lo, DVec3::ZERO, lo), DVec3::select(open_hi, DVec3::ZERO, hi));
+    let size = DVec3::select(open_lo | open_hi, DVec3::ZERO, hi - lo).length();
+    let reach = flo.abs().max(fhi.abs()).max_element();
+    let margin = 1e-5 * size + 1e-6 * reach + 1e-30;
     let mut out = Aabb::EMPTY;
     for i in 0..3 {
         out.min[i] = if lo[i] <= -0.5 * far { f32::NEG_INFINITY } else { ((lo[i] - margin) as f32).max(clip.min[i]) };
@@ -197,8 +201,10 @@ mod tests {
                 }
             }
         }
+        // |x| + |y| + |z| <= 2 / sqrt(3) (the normals are made unit length).
         let b = polytope_box(&ps, &Aabb::INFINITE);
-        assert!((b.max.x - 2.0).abs() < 1e-4 && (b.min.y + 2.0).abs() < 1e-4, "{b:?}");
+        let v = 2.0 / 3f32.sqrt();
+        assert!((b.max.x - v).abs() < 1e-4 && (b.min.y + v).abs() < 1e-4, "{b:?}");
     }
 
     #[test]
