@@ -314,7 +314,12 @@ fn main() {
             } else {
                 println!("(no Embree program at {}; run benches/embree/run.sh)", embree.display());
             }
-            let methods = [("closest_hit", trace1 as Tracer), ("closest_hit8", trace8 as Tracer), ("sse2_closest_hit8", trace8_sse as Tracer), ("binary (old)", trace_pairs as Tracer)];
+            let methods = [
+                ("closest_hit", trace1 as Tracer),
+                ("closest_hit8", trace8 as Tracer),
+                ("sse2_closest_hit8", trace8_sse as Tracer),
+                ("binary (old)", trace_pairs as Tracer),
+            ];
             let only: String = env("RB_METHODS", String::new());
             for (name, f) in methods {
                 if !only.is_empty() && !only.split(',').any(|x| name.starts_with(x)) {

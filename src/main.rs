@@ -229,7 +229,11 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            if e.downcast_ref::<BadInput>().is_some() { ExitCode::from(2) } else { ExitCode::from(1) }
+            if e.downcast_ref::<BadInput>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::from(1)
+            }
         }
     }
 }
@@ -261,7 +265,16 @@ fn settings(sf: &SceneFile, img: ImageArgs, aov: Aov) -> Result<RenderSettings> 
     if samples > MAX_SAMPLES {
         return Err(BadInput(format!("{w}x{h} at {spp} spp is {samples} samples, more than 2^32 in one render")).into());
     }
-    Ok(RenderSettings { width: w, height: h, spp, aov, background: sf.background, lights: sf.lights.clone(), ambient: 0.1, part: Part::WHOLE })
+    Ok(RenderSettings {
+        width: w,
+        height: h,
+        spp,
+        aov,
+        background: sf.background,
+        lights: sf.lights.clone(),
+        ambient: 0.1,
+        part: Part::WHOLE,
+    })
 }
 
 /// A progress bar on standard error, shown only once a render has run for a second.
@@ -349,8 +362,7 @@ fn run(cli: Cli) -> Result<()> {
                 done.fetch_max(d, Ordering::Relaxed);
             });
             prog.finish();
-            rothray_io::write_png(&output, s.width, s.height, &img)
-                .with_context(|| format!("cannot write {}", output.display()))?;
+            rothray_io::write_png(&output, s.width, s.height, &img).with_context(|| format!("cannot write {}", output.display()))?;
             Ok(())
         }
         Cmd::Merge { parts, output } => {
@@ -385,9 +397,9 @@ fn run(cli: Cli) -> Result<()> {
                 }
             };
             let mut out: Box<dyn Write> = match &output {
-                Some(p) => Box::new(std::io::BufWriter::new(
-                    std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
-                )),
+                Some(p) => {
+                    Box::new(std::io::BufWriter::new(std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?))
+                }
                 None => Box::new(std::io::BufWriter::new(std::io::stdout().lock())),
             };
             let mut bad = 0;
@@ -590,11 +602,7 @@ fn check_mesh(path: &Path, json: bool, files: &FileArgs) -> Result<()> {
     println!("area                   {:.6}", r.area);
     println!(
         "usable as a solid      {}",
-        if r.usable_as_solid {
-            format!("yes (inside rule: {:?})", r.rule).to_lowercase()
-        } else {
-            "no".to_string()
-        }
+        if r.usable_as_solid { format!("yes (inside rule: {:?})", r.rule).to_lowercase() } else { "no".to_string() }
     );
     for w in &r.warnings {
         println!("warning                {w}");
@@ -603,14 +611,7 @@ fn check_mesh(path: &Path, json: bool, files: &FileArgs) -> Result<()> {
 }
 
 /// `bench --tolerances`: run time against error for the solver tolerance.
-fn bench_tolerances(
-    sf: &SceneFile,
-    image: ImageArgs,
-    repeats: u32,
-    tols: &[f32],
-    plot: Option<&Path>,
-    json: bool,
-) -> Result<()> {
+fn bench_tolerances(sf: &SceneFile, image: ImageArgs, repeats: u32, tols: &[f32], plot: Option<&Path>, json: bool) -> Result<()> {
     use rothray_engine::{bake_scene, Ray};
     let scene = sf.path.as_path();
     // One sample per pixel: the error is measured per camera ray.
@@ -692,10 +693,7 @@ fn plot_curve(path: &Path, scene: &Path, rows: &[(f32, f64, f64, f64, usize)]) -
     let floor = 1e-9f64;
     let ys: Vec<f64> = rows.iter().flat_map(|r| [r.2.max(floor), r.3.max(floor)]).collect();
     let (ylo, yhi) = (ys.iter().cloned().fold(f64::INFINITY, f64::min) / 2.0, ys.iter().cloned().fold(0.0, f64::max) * 2.0);
-    let (xlo, xhi) = (
-        rows.iter().map(|r| r.1).fold(f64::INFINITY, f64::min) * 0.9,
-        rows.iter().map(|r| r.1).fold(0.0, f64::max) * 1.1,
-    );
+    let (xlo, xhi) = (rows.iter().map(|r| r.1).fold(f64::INFINITY, f64::min) * 0.9, rows.iter().map(|r| r.1).fold(0.0, f64::max) * 1.1);
     let mut chart = ChartBuilder::on(&root)
         .caption(format!("{}: trace time vs error of t", scene.file_name().unwrap_or_default().to_string_lossy()), ("sans-serif", 20))
         .margin(12)
@@ -705,9 +703,15 @@ fn plot_curve(path: &Path, scene: &Path, rows: &[(f32, f64, f64, f64, usize)]) -
     chart.configure_mesh().x_desc("trace time, s (median)").y_desc("error of t / scene size").draw()?;
     let max_pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.1, r.2.max(floor))).collect();
     let rms_pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.1, r.3.max(floor))).collect();
-    chart.draw_series(LineSeries::new(max_pts.clone(), &RED))?.label("max").legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
+    chart
+        .draw_series(LineSeries::new(max_pts.clone(), &RED))?
+        .label("max")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
     chart.draw_series(max_pts.iter().map(|p| Circle::new(*p, 3, RED.filled())))?;
-    chart.draw_series(LineSeries::new(rms_pts.clone(), &BLUE))?.label("rms").legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
+    chart
+        .draw_series(LineSeries::new(rms_pts.clone(), &BLUE))?
+        .label("rms")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
     chart.draw_series(rows.iter().map(|r| Text::new(format!("{:.0e}", r.0), (r.1, r.2.max(floor)), ("sans-serif", 12))))?;
     chart.configure_series_labels().background_style(WHITE).border_style(BLACK).draw()?;
     root.present()?;

@@ -17,7 +17,9 @@ pub fn tmpdir(name: &str) -> std::path::PathBuf {
 const CAM: &str = r#""camera":{"eye":[0,0,5],"target":[0,0,0],"up":[0,1,0],"fov_y_deg":40}"#;
 
 fn scene_with(shape: &str) -> String {
-    format!(r#"{{{CAM},"image":{{"width":32,"height":24}},"objects":[{{"name":"a","shape":{{"union":[{{"sphere":{{"center":[0,0,0],"radius":1}}}},{shape}]}}}}]}}"#)
+    format!(
+        r#"{{{CAM},"image":{{"width":32,"height":24}},"objects":[{{"name":"a","shape":{{"union":[{{"sphere":{{"center":[0,0,0],"radius":1}}}},{shape}]}}}}]}}"#
+    )
 }
 
 fn expect_error(json: &str, must_contain: &[&str]) {
@@ -51,15 +53,36 @@ fn contract_errors_are_located_with_exit_2() {
         (r#"{"cone":{"a":[0,0,0],"b":[0,1,0],"radius_a":-1,"radius_b":0}}"#, &["objects[0].shape.union[1].cone.radius_a"]),
         (r#"{"sphere":{"center":[0,1e39,0],"radius":1}}"#, &["objects[0].shape.union[1].sphere.center[1]", "not finite"]),
         (r#"{"sphere":{"center":[0,"x",0],"radius":1}}"#, &["objects[0].shape.union[1].sphere.center[1]"]),
-        (r#"{"transformed":{"matrix":[1,0,0,0, 0,1,0,0, 0,0,0,0, 0,0,0,1],"shape":{"sphere":{"center":[0,0,0],"radius":1}}}}"#, &["objects[0].shape.union[1].transformed.matrix", "singular"]),
-        (r#"{"transformed":{"scale":[1,0,1],"shape":{"sphere":{"center":[0,0,0],"radius":1}}}}"#, &["objects[0].shape.union[1].transformed.scale"]),
+        (
+            r#"{"transformed":{"matrix":[1,0,0,0, 0,1,0,0, 0,0,0,0, 0,0,0,1],"shape":{"sphere":{"center":[0,0,0],"radius":1}}}}"#,
+            &["objects[0].shape.union[1].transformed.matrix", "singular"],
+        ),
+        (
+            r#"{"transformed":{"scale":[1,0,1],"shape":{"sphere":{"center":[0,0,0],"radius":1}}}}"#,
+            &["objects[0].shape.union[1].transformed.scale"],
+        ),
         (r#"{"union":[]}"#, &["objects[0].shape.union[1].union"]),
         (r#"{"sphere":{"center":[0,0,0],"radius":1},"name":"a"}"#, &["objects[0].shape.union[1].name", "twice"]),
-        (r#"{"swept_sphere":{"bezier":[[0,0,0,1],[1,0,0,1],[2,0,0,1],[3,0,0,1],[4,0,0,1]]}}"#, &["objects[0].shape.union[1].swept_sphere.bezier", "3n+1"]),
-        (r#"{"swept_sphere":{"bezier":[[0,0,0,-1],[1,0,0,1],[2,0,0,1],[3,0,0,1]]}}"#, &["objects[0].shape.union[1].swept_sphere.bezier", "negative"]),
-        (r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0],[3,0,0]],"profile":{"polygon":[[0,0],[1,1],[1,0],[0,1]]}}}"#, &["objects[0].shape.union[1].generalized_cylinder.profile", "self-intersecting"]),
-        (r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0]],"profile":{"circle":0.2}}}"#, &["objects[0].shape.union[1].generalized_cylinder.path"]),
-        (r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0],[3,0,0]],"profile":{"circle":0.2},"frame":"bogus"}}"#, &["objects[0].shape.union[1].generalized_cylinder.frame"]),
+        (
+            r#"{"swept_sphere":{"bezier":[[0,0,0,1],[1,0,0,1],[2,0,0,1],[3,0,0,1],[4,0,0,1]]}}"#,
+            &["objects[0].shape.union[1].swept_sphere.bezier", "3n+1"],
+        ),
+        (
+            r#"{"swept_sphere":{"bezier":[[0,0,0,-1],[1,0,0,1],[2,0,0,1],[3,0,0,1]]}}"#,
+            &["objects[0].shape.union[1].swept_sphere.bezier", "negative"],
+        ),
+        (
+            r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0],[3,0,0]],"profile":{"polygon":[[0,0],[1,1],[1,0],[0,1]]}}}"#,
+            &["objects[0].shape.union[1].generalized_cylinder.profile", "self-intersecting"],
+        ),
+        (
+            r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0]],"profile":{"circle":0.2}}}"#,
+            &["objects[0].shape.union[1].generalized_cylinder.path"],
+        ),
+        (
+            r#"{"generalized_cylinder":{"path":[[0,0,0],[1,0,0],[2,1,0],[3,0,0]],"profile":{"circle":0.2},"frame":"bogus"}}"#,
+            &["objects[0].shape.union[1].generalized_cylinder.frame"],
+        ),
         (r#"{"mesh":{"path":"no-such-mesh.obj"}}"#, &["objects[0].shape.union[1].mesh.path", "no-such-mesh.obj"]),
         (r#"{"mesh":{"path":"flat.obj"}}"#, &["objects[0].shape.union[1].mesh.path", "no volume"]),
         (r#"{"mesh":{"path":"flat.obj","inside":"sometimes"}}"#, &["objects[0].shape.union[1].mesh.inside"]),
@@ -69,7 +92,10 @@ fn contract_errors_are_located_with_exit_2() {
     }
     // Not JSON at all: line and column.
     expect_error("{\"camera\": [1,2,", &["invalid JSON", ":1:"]);
-    expect_error(&format!("{{{CAM},\"objects\":[{{\"shape\":{{\"sphere\":{{\"center\":[0,0,0],\"radius\":1}}}}}}],\"bogus\":1}}"), &["bogus", "unknown key"]);
+    expect_error(
+        &format!("{{{CAM},\"objects\":[{{\"shape\":{{\"sphere\":{{\"center\":[0,0,0],\"radius\":1}}}}}}],\"bogus\":1}}"),
+        &["bogus", "unknown key"],
+    );
     expect_error(r#"{"objects":[]}"#, &["missing field `camera`"]);
     expect_error(&format!("{{{},\"objects\":[]}}", CAM.replace("40", "0")), &["camera.fov_y_deg"]);
     // Unreadable file.

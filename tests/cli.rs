@@ -32,7 +32,8 @@ fn trace_nearest_and_all() {
     let t: f32 = l[1][2].parse().unwrap();
     assert_eq!(format!("{t:?}"), l[1][2]);
 
-    let out = rothray().arg("trace").arg(sampler()).arg("--rays").arg(&rays).arg("--all").arg("-o").arg(dir.join("all.csv")).output().unwrap();
+    let out =
+        rothray().arg("trace").arg(sampler()).arg("--rays").arg(&rays).arg("--all").arg("-o").arg(dir.join("all.csv")).output().unwrap();
     assert!(out.status.success());
     let all = std::fs::read_to_string(dir.join("all.csv")).unwrap();
     let mut lines = all.lines();
@@ -50,7 +51,8 @@ fn trace_nearest_and_all() {
 
 #[test]
 fn bench_json_last_line() {
-    let out = rothray().args(["bench"]).arg(sampler()).args(["--width", "64", "--height", "36", "--repeats", "3", "--json"]).output().unwrap();
+    let out =
+        rothray().args(["bench"]).arg(sampler()).args(["--width", "64", "--height", "36", "--repeats", "3", "--json"]).output().unwrap();
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     let last = text.lines().last().unwrap();
@@ -66,7 +68,14 @@ fn render_every_aov() {
     let dir = tmpdir("aov");
     for aov in ["shaded", "depth", "normal", "id"] {
         let png = dir.join(format!("{aov}.png"));
-        let out = rothray().arg("render").arg(sampler()).arg("-o").arg(&png).args(["--width", "80", "--height", "45", "--spp", "4", "--aov", aov]).output().unwrap();
+        let out = rothray()
+            .arg("render")
+            .arg(sampler())
+            .arg("-o")
+            .arg(&png)
+            .args(["--width", "80", "--height", "45", "--spp", "4", "--aov", aov])
+            .output()
+            .unwrap();
         assert!(out.status.success(), "{aov}: {}", String::from_utf8_lossy(&out.stderr));
         let bytes = std::fs::read(&png).unwrap();
         assert_eq!(&bytes[1..4], b"PNG");

@@ -8,7 +8,16 @@ use rothray::engine::{render, Aov, RenderScene, RenderSettings};
 fn id_image(path: &str, w: u32, h: u32) -> Vec<u8> {
     let sf = rothray::io::load_scene(std::path::Path::new(path)).expect("scene");
     let scene = RenderScene::from_world(&sf.world).expect("bake");
-    let s = RenderSettings { width: w, height: h, spp: 1, aov: Aov::Id, background: Vec3::ZERO, lights: vec![], ambient: 0.1, part: rothray_engine::Part::WHOLE };
+    let s = RenderSettings {
+        width: w,
+        height: h,
+        spp: 1,
+        aov: Aov::Id,
+        background: Vec3::ZERO,
+        lights: vec![],
+        ambient: 0.1,
+        part: rothray_engine::Part::WHOLE,
+    };
     render(&scene, &sf.camera, &s, &|_, _| {}).0
 }
 

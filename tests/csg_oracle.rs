@@ -37,11 +37,13 @@ fn random_csg_spans_match_point_classification() {
             check_random_ray(&scene, &tree, &mut rng, &format!("case {case} ray {r}"), &mut st);
             // Point queries agree with the model away from surfaces.
             let p = rp(&mut rng, 1.2);
-            let near = |p: DVec3| (0..6).any(|k| {
-                let mut e = DVec3::ZERO;
-                e[k / 2] = if k % 2 == 0 { 1e-4 } else { -1e-4 };
-                f(p + e) != f(p)
-            });
+            let near = |p: DVec3| {
+                (0..6).any(|k| {
+                    let mut e = DVec3::ZERO;
+                    e[k / 2] = if k % 2 == 0 { 1e-4 } else { -1e-4 };
+                    f(p + e) != f(p)
+                })
+            };
             if !near(p) {
                 assert_eq!(scene.contains(p.as_vec3(), 0), f(p), "case {case}: contains({p:?})");
             }
@@ -158,7 +160,13 @@ fn random_csg_with_meshes_packets_match_single_rays() {
             scene.intersect_packet(&packet, &mut ps, &mut out);
             for k in 0..8 {
                 let one = scene.intersect(&packet[k]);
-                assert_eq!(hit_key(out[k]), hit_key(one), "case {case} packet {p} ray {k}: {:?} trees {:?}", packet[k], trees.iter().map(|t| t.json()).collect::<Vec<_>>());
+                assert_eq!(
+                    hit_key(out[k]),
+                    hit_key(one),
+                    "case {case} packet {p} ray {k}: {:?} trees {:?}",
+                    packet[k],
+                    trees.iter().map(|t| t.json()).collect::<Vec<_>>()
+                );
                 rays += 1;
                 hits += one.is_some() as usize;
                 covered_misses += (scene.packet_covered() && one.is_none()) as usize;
@@ -211,7 +219,9 @@ fn bitten_mesh_packets_match_single_rays() {
                 scene.intersect_packet_with(&packet, &mut ps, &mut bare, false, None);
                 for k in 0..8 {
                     let one = scene.intersect(&packet[k]);
-                    let key = |h: Option<rothray::engine::Hit>| h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub, h.normal.to_array().map(f32::to_bits)));
+                    let key = |h: Option<rothray::engine::Hit>| {
+                        h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub, h.normal.to_array().map(f32::to_bits)))
+                    };
                     assert_eq!(key(out[k]), key(one), "view {view} eye {eye} pixel ({}, {})", fx[k], fy[k]);
                     let no_normal = one.map(|h| rothray::engine::Hit { normal: glam::Vec3::ZERO, ..h });
                     assert_eq!(key(bare[k]), key(no_normal), "view {view} eye {eye} pixel ({}, {}) without normals", fx[k], fy[k]);
@@ -237,7 +247,10 @@ fn bitten_mesh_packets_match_single_rays() {
         assert_eq!(out[k].map(|h| (h.t.to_bits(), h.leaf)), one.map(|h| (h.t.to_bits(), h.leaf)), "unusable-ray packet, lane {k}");
     }
     assert!(out[0].is_some(), "the packet is aimed at the mesh");
-    println!("{rays} rays, {hits} hits, {} by the packet shortcut, {} given an interval to walk on through the bite (two queries per ray)", ps.shortcuts, ps.throughs);
+    println!(
+        "{rays} rays, {hits} hits, {} by the packet shortcut, {} given an interval to walk on through the bite (two queries per ray)",
+        ps.shortcuts, ps.throughs
+    );
     assert!(hits > 10_000 && ps.shortcuts > 10_000 && ps.throughs > 500);
 }
 
@@ -254,7 +267,12 @@ fn packet_shortcut_keeps_the_short_span_rule() {
     let d = glam::Vec3::new(1e-4, 1e-4, -1.0);
     let o = glam::Vec3::new(1.0 - 1e-5, 0.0, 0.0) - d * 5.0;
     let packet: Vec<rothray::engine::Ray> = (0..8)
-        .map(|k| rothray::engine::Ray { origin: o, dir: d + glam::Vec3::new(k as f32 * 1e-6, (k / 4) as f32 * 1e-6, 0.0), tmin: 0.0, tmax: f32::INFINITY })
+        .map(|k| rothray::engine::Ray {
+            origin: o,
+            dir: d + glam::Vec3::new(k as f32 * 1e-6, (k / 4) as f32 * 1e-6, 0.0),
+            tmin: 0.0,
+            tmax: f32::INFINITY,
+        })
         .collect();
     let mut ps = rothray::engine::PacketScratch::default();
     let mut out = [None; 8];
@@ -295,9 +313,17 @@ fn packets_and_single_rays_match_the_full_diagram_fuzz() {
                 scene.intersect_packet(&packet, &mut ps, &mut out);
                 for k in 0..8 {
                     let one = scene.intersect(&packet[k]);
-                    let ctx = || format!("seed {:#x} case {case} packet {p} ray {k}: {:?} trees {:?}", 0xabc0 + seed, packet[k], trees.iter().map(|t| t.json()).collect::<Vec<_>>());
+                    let ctx = || {
+                        format!(
+                            "seed {:#x} case {case} packet {p} ray {k}: {:?} trees {:?}",
+                            0xabc0 + seed,
+                            packet[k],
+                            trees.iter().map(|t| t.json()).collect::<Vec<_>>()
+                        )
+                    };
                     assert_eq!(hit_key(out[k]), hit_key(one), "packet vs single ray, {}", ctx());
-                    inside += (0..trees.len() as u32).any(|oi| scene.spans(&packet[k], oi).first().is_some_and(|s| !s.s0.is_real())) as usize;
+                    inside +=
+                        (0..trees.len() as u32).any(|oi| scene.spans(&packet[k], oi).first().is_some_and(|s| !s.s0.is_real())) as usize;
                     let want = nearest_in_diagrams(&scene, &packet[k], trees.len());
                     assert_eq!(one.map(|h| h.t), want, "single ray vs full diagram, {}", ctx());
                     rays += 1;

@@ -135,7 +135,8 @@ fn assert_refused(l: &Layout, scene: &Path, why: &str) {
     assert!(opened.iter().all(|p| p.starts_with(&l.scene_dir)), "opened outside: {opened:?}");
     if let Some(files) = strace_opened(&["render".as_ref(), scene.as_os_str(), "-o".as_ref(), png.as_os_str()]) {
         assert!(files.iter().any(|f| f.ends_with(".json")), "strace saw the scene opened: {files:?}");
-        let bad: Vec<_> = files.iter().filter(|f| f.contains("/outside/") || f.starts_with("/etc/passwd") || f.starts_with("/dev/zero")).collect();
+        let bad: Vec<_> =
+            files.iter().filter(|f| f.contains("/outside/") || f.starts_with("/etc/passwd") || f.starts_with("/dev/zero")).collect();
         assert!(bad.is_empty(), "opened outside the scene's folder: {bad:?}");
     }
 }
@@ -145,7 +146,8 @@ fn meshes_outside_the_scene_folder_are_refused() {
     let l = layout("outside");
     // `..`, an absolute path, and system files.
     let outside_abs = l.outside.join("tet.obj").display().to_string();
-    for (name, mesh) in [("dotdot", "../outside/tet.obj"), ("abs", outside_abs.as_str()), ("passwd", "/etc/passwd"), ("zero", "/dev/zero")] {
+    for (name, mesh) in [("dotdot", "../outside/tet.obj"), ("abs", outside_abs.as_str()), ("passwd", "/etc/passwd"), ("zero", "/dev/zero")]
+    {
         let f = l.scene_dir.join(format!("{name}.json"));
         std::fs::write(&f, mesh_scene(mesh)).unwrap();
         assert_refused(&l, &f, "outside the allowed folders");
@@ -190,7 +192,17 @@ fn allow_path_admits_an_outside_folder_and_only_it() {
     std::fs::write(&rays, "2,1.5,4,-1.7,-1.2,-3.7\n").unwrap();
     let out = rothray().arg("trace").arg(&f).arg("--rays").arg(&rays).arg("--allow-path").arg(&other).output().unwrap();
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    let out = rothray().arg("trace").arg(&f).arg("--rays").arg(&rays).arg("--allow-path").arg(&other).arg("--allow-path").arg(&l.outside).output().unwrap();
+    let out = rothray()
+        .arg("trace")
+        .arg(&f)
+        .arg("--rays")
+        .arg(&rays)
+        .arg("--allow-path")
+        .arg(&other)
+        .arg("--allow-path")
+        .arg(&l.outside)
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).lines().nth(1).unwrap().starts_with("0,1,"), "the ray hits the allowed mesh");
     let out = rothray()
@@ -233,13 +245,7 @@ fn gltf_buffers_outside_the_folder_are_refused_even_percent_escaped() {
         assert!(err.contains("buffer 0") && err.contains("--allow-path"), "{err}");
     }
     // Allowed, the escaped one loads.
-    let out = rothray()
-        .arg("check")
-        .arg(l.scene_dir.join("escaped.gltf"))
-        .arg("--allow-path")
-        .arg(&l.outside)
-        .output()
-        .unwrap();
+    let out = rothray().arg("check").arg(l.scene_dir.join("escaped.gltf")).arg("--allow-path").arg(&l.outside).output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
 }
 

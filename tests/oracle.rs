@@ -10,19 +10,50 @@ use std::fmt::Write;
 
 #[derive(Clone, Debug)]
 pub enum Shape {
-    Sphere { c: DVec3, r: f64 },
-    Box { min: DVec3, max: DVec3 },
-    Cylinder { a: DVec3, b: DVec3, r: f64 },
-    Cone { a: DVec3, b: DVec3, ra: f64, rb: f64 },
-    Torus { c: DVec3, axis: DVec3, major: f64, minor: f64 },
-    Plane { n: DVec3, d: f64 },
+    Sphere {
+        c: DVec3,
+        r: f64,
+    },
+    Box {
+        min: DVec3,
+        max: DVec3,
+    },
+    Cylinder {
+        a: DVec3,
+        b: DVec3,
+        r: f64,
+    },
+    Cone {
+        a: DVec3,
+        b: DVec3,
+        ra: f64,
+        rb: f64,
+    },
+    Torus {
+        c: DVec3,
+        axis: DVec3,
+        major: f64,
+        minor: f64,
+    },
+    Plane {
+        n: DVec3,
+        d: f64,
+    },
     /// A triangle mesh (OBJ file at `path`) of the octahedron `|p - c|_1 <= r`,
     /// its faces subdivided: flat, so the model classifies it exactly.
-    Octa { c: DVec3, r: f64, path: String },
+    Octa {
+        c: DVec3,
+        r: f64,
+        path: String,
+    },
     Union(Vec<Shape>),
     Inter(Vec<Shape>),
     Diff(Vec<Shape>),
-    Xf { m: DAffine3, json: String, s: Box<Shape> },
+    Xf {
+        m: DAffine3,
+        json: String,
+        s: Box<Shape>,
+    },
 }
 
 fn v(x: DVec3) -> String {
@@ -71,16 +102,12 @@ impl Shape {
             Shape::Cylinder { a, b, r } => {
                 format!("{{\"cylinder\":{{\"a\":{},\"b\":{},\"radius\":{r:?}}}}}", v(*a), v(*b))
             }
-            Shape::Cone { a, b, ra, rb } => format!(
-                "{{\"cone\":{{\"a\":{},\"b\":{},\"radius_a\":{ra:?},\"radius_b\":{rb:?}}}}}",
-                v(*a),
-                v(*b)
-            ),
-            Shape::Torus { c, axis, major, minor } => format!(
-                "{{\"torus\":{{\"center\":{},\"axis\":{},\"major\":{major:?},\"minor\":{minor:?}}}}}",
-                v(*c),
-                v(*axis)
-            ),
+            Shape::Cone { a, b, ra, rb } => {
+                format!("{{\"cone\":{{\"a\":{},\"b\":{},\"radius_a\":{ra:?},\"radius_b\":{rb:?}}}}}", v(*a), v(*b))
+            }
+            Shape::Torus { c, axis, major, minor } => {
+                format!("{{\"torus\":{{\"center\":{},\"axis\":{},\"major\":{major:?},\"minor\":{minor:?}}}}}", v(*c), v(*axis))
+            }
             Shape::Plane { n, d } => format!("{{\"plane\":{{\"normal\":{},\"offset\":{d:?}}}}}", v(*n)),
             Shape::Octa { path, .. } => format!("{{\"mesh\":{{\"path\":{path:?}}}}}"),
             Shape::Union(c) | Shape::Inter(c) | Shape::Diff(c) => {
@@ -155,7 +182,18 @@ pub fn random_xf(rng: &mut SmallRng, s: Shape) -> Shape {
         let r = |i: usize| m.row(i);
         let json = format!(
             "\"matrix\":[{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},{:?},0,0,0,1]",
-            r(0).x, r(0).y, r(0).z, t.x, r(1).x, r(1).y, r(1).z, t.y, r(2).x, r(2).y, r(2).z, t.z
+            r(0).x,
+            r(0).y,
+            r(0).z,
+            t.x,
+            r(1).x,
+            r(1).y,
+            r(1).z,
+            t.y,
+            r(2).x,
+            r(2).y,
+            r(2).z,
+            t.z
         );
         return Shape::Xf { m: a, json, s: Box::new(s) };
     }
@@ -252,14 +290,16 @@ pub fn random_tree_with(rng: &mut SmallRng, depth: u32, meshes: bool) -> Shape {
         1 => Shape::Inter(c),
         _ => Shape::Diff(c),
     };
-    if rng.gen_bool(0.3) { random_xf(rng, s) } else { s }
+    if rng.gen_bool(0.3) {
+        random_xf(rng, s)
+    } else {
+        s
+    }
 }
 
 /// A scene JSON with the given objects.
 pub fn scene_json(objects: &[Shape]) -> String {
-    let mut s = String::from(
-        "{\"camera\":{\"eye\":[0,0,6],\"target\":[0,0,0],\"up\":[0,1,0],\"fov_y_deg\":40},\"objects\":[",
-    );
+    let mut s = String::from("{\"camera\":{\"eye\":[0,0,6],\"target\":[0,0,0],\"up\":[0,1,0],\"fov_y_deg\":40},\"objects\":[");
     for (i, o) in objects.iter().enumerate() {
         if i > 0 {
             s.push(',');
@@ -304,7 +344,17 @@ pub struct Check {
 /// Checks the engine's spans of one ray against the f64 predicate:
 /// sorted and disjoint; span midpoints inside; gaps (sampled) outside; every
 /// real end within `tol` (in units of length) of an f64 crossing.
-pub fn check_spans(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, tmin: f64, tmax: f64, spans: &[Span], tol: f64, ctx: &str, st: &mut Check) {
+pub fn check_spans(
+    f: &dyn Fn(DVec3) -> bool,
+    o: DVec3,
+    d: DVec3,
+    tmin: f64,
+    tmax: f64,
+    spans: &[Span],
+    tol: f64,
+    ctx: &str,
+    st: &mut Check,
+) {
     // The engine sees the ray in f32: judge it on the same ray.
     let (o, d) = (o.as_vec3().as_dvec3(), d.as_vec3().as_dvec3());
     st.rays += 1;
@@ -325,10 +375,9 @@ pub fn check_spans(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, tmin: f64, tma
         let prev_end = if k > 0 { spans[k - 1].t1 as f64 } else { f64::NEG_INFINITY };
         let next_start = if k + 1 < spans.len() { spans[k + 1].t0 as f64 } else { f64::INFINITY };
         let half = 0.5 * (t1 - t0);
-        for (t, real, inward, room_out) in [
-            (t0, s.s0.is_real(), 1.0, 0.5 * (t0 - prev_end)),
-            (t1, s.s1.is_real(), -1.0, 0.5 * (next_start - t1)),
-        ] {
+        for (t, real, inward, room_out) in
+            [(t0, s.s0.is_real(), 1.0, 0.5 * (t0 - prev_end)), (t1, s.s1.is_real(), -1.0, 0.5 * (next_start - t1))]
+        {
             if !real {
                 continue;
             }
@@ -343,11 +392,18 @@ pub fn check_spans(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, tmin: f64, tma
                 let (mut a, mut b) = (pout, pin);
                 for _ in 0..60 {
                     let m = 0.5 * (a + b);
-                    if f(o + d * m) { b = m } else { a = m }
+                    if f(o + d * m) {
+                        b = m
+                    } else {
+                        a = m
+                    }
                 }
                 st.max_err = st.max_err.max((0.5 * (a + b) - t).abs() * dl);
             } else if di >= 0.25 * tt && dout >= 0.25 * tt && !near_boundary(f, o + d * t, tol) {
-                panic!("{ctx}: span end t={t} is not a boundary within {tol} (inside {fin} at {pin}, outside {} at {pout}); spans {spans:?}", !fout);
+                panic!(
+                    "{ctx}: span end t={t} is not a boundary within {tol} (inside {fin} at {pin}, outside {} at {pout}); spans {spans:?}",
+                    !fout
+                );
             }
         }
     }
@@ -391,7 +447,15 @@ pub fn hit_key(h: Option<rothray::engine::Hit>) -> Option<(u32, u32, u32, u32)> 
 /// The nearest-hit answer a span list gives: its first real surface (the
 /// entry, or the exit of a span that starts at the ray's start).
 pub fn first_surface_t(spans: &[Span]) -> Option<f32> {
-    spans.first().and_then(|s| if s.s0.is_real() { Some(s.t0) } else if s.s1.is_real() { Some(s.t1) } else { None })
+    spans.first().and_then(|s| {
+        if s.s0.is_real() {
+            Some(s.t0)
+        } else if s.s1.is_real() {
+            Some(s.t1)
+        } else {
+            None
+        }
+    })
 }
 
 /// The nearest of the first surfaces of objects `0..n`' full diagrams.

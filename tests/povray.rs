@@ -17,7 +17,14 @@ fn compare(scene: &str, w: u32, h: u32, extra: &[&str]) {
     let dir = tmpdir("pov");
     let name = std::path::Path::new(scene).file_stem().unwrap().to_string_lossy().to_string();
     let png = dir.join(format!("{name}_id.png"));
-    let st = rothray().arg("render").arg(scene).arg("-o").arg(&png).args(["--aov", "id", "--width", &w.to_string(), "--height", &h.to_string()]).status().unwrap();
+    let st = rothray()
+        .arg("render")
+        .arg(scene)
+        .arg("-o")
+        .arg(&png)
+        .args(["--aov", "id", "--width", &w.to_string(), "--height", &h.to_string()])
+        .status()
+        .unwrap();
     assert!(st.success());
     let out = Command::new("python3")
         .arg(format!("{root}/tools/pov_compare.py"))

@@ -12,7 +12,16 @@ fn flat_pictures_match_single_ray_hits() {
         let sf = rothray::io::load_scene(std::path::Path::new(&path)).expect("scene");
         let scene = RenderScene::from_world(&sf.world).expect("bake");
         let bg = Vec3::new(0.2, 0.3, 0.4);
-        let s = RenderSettings { width: w, height: h, spp: 1, aov: Aov::Shaded, background: bg, lights: vec![], ambient: 0.7, part: rothray_engine::Part::WHOLE };
+        let s = RenderSettings {
+            width: w,
+            height: h,
+            spp: 1,
+            aov: Aov::Shaded,
+            background: bg,
+            lights: vec![],
+            ambient: 0.7,
+            part: rothray_engine::Part::WHOLE,
+        };
         let img = render(&scene, &sf.camera, &s, &|_, _| {}).0;
         let rays = sf.camera.rays(w, h);
         let mut hits = 0;

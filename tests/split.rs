@@ -128,7 +128,8 @@ fn bad_parts_are_refused_and_the_output_kept() {
     std::fs::write(&out, b"keep me").unwrap();
     let kept = |what: &str| {
         assert_eq!(std::fs::read(&out).unwrap(), b"keep me", "{what}: the existing output was touched");
-        let stray: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n.to_string_lossy().contains(".tmp")).collect();
+        let stray: Vec<_> =
+            std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n.to_string_lossy().contains(".tmp")).collect();
         assert!(stray.is_empty(), "{what}: temporary files left: {stray:?}");
     };
 
@@ -164,7 +165,16 @@ fn bad_parts_are_refused_and_the_output_kept() {
 
     // Another tile size (the tiles' programs, so possibly the pixels, differ).
     let q = dir.join("tile32.part");
-    let out32 = rothray().env("ROTHRAY_TILE", "32x16").arg("render").arg(&sc).arg("-o").arg(&q).args(["--tile", "2/3"]).args(flags).output().unwrap();
+    let out32 = rothray()
+        .env("ROTHRAY_TILE", "32x16")
+        .arg("render")
+        .arg(&sc)
+        .arg("-o")
+        .arg(&q)
+        .args(["--tile", "2/3"])
+        .args(flags)
+        .output()
+        .unwrap();
     ok(&out32, "ROTHRAY_TILE=32x16");
     let m = merge(&[p[0].clone(), p[1].clone(), q.clone()], &out);
     refused(&m, &q, &["tile size", "32x16"]);
@@ -208,7 +218,13 @@ fn bad_tiles_are_located_errors() {
     let dir = tmpdir("split-tile");
     let sc = scene("sampler.json");
     let o = dir.join("x.part");
-    for (t, want) in [("3/3", "not below N = 3"), ("0/0", "N is 0"), ("1", "expected I/N"), ("a/2", "not a whole number"), ("-1/2", "not a whole number")] {
+    for (t, want) in [
+        ("3/3", "not below N = 3"),
+        ("0/0", "N is 0"),
+        ("1", "expected I/N"),
+        ("a/2", "not a whole number"),
+        ("-1/2", "not a whole number"),
+    ] {
         let out = rothray().arg("render").arg(&sc).arg("-o").arg(&o).arg(format!("--tile={t}")).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "--tile {t}: {err}");
@@ -262,7 +278,13 @@ fn trace_ranges_concatenate_to_the_whole_file() {
         let part = trace(Some("20..21"));
         assert!(part.lines().skip(1).all(|l| l.starts_with("20,")), "{part}");
     }
-    for (r, want) in [("0..41", "B can be at most 40"), ("41..", "B can be at most 40"), ("5..3", "above"), ("x..3", "not a whole number"), ("7", "expected A..B")] {
+    for (r, want) in [
+        ("0..41", "B can be at most 40"),
+        ("41..", "B can be at most 40"),
+        ("5..3", "above"),
+        ("x..3", "not a whole number"),
+        ("7", "expected A..B"),
+    ] {
         let out = rothray().arg("trace").arg(&sc).arg("--rays").arg(&rays).args(["--range", r]).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "--range {r}: {err}");
@@ -293,7 +315,8 @@ fn kubernetes_indexed_job_command_lines() {
     let local = |cmd: &str| cmd.replace("/data", &data.display().to_string()).replace("rothray ", &format!("{bin} "));
     // Pods in any order.
     for i in (0..completions).rev() {
-        let out = std::process::Command::new("sh").arg("-c").arg(local(&render)).env("JOB_COMPLETION_INDEX", i.to_string()).output().unwrap();
+        let out =
+            std::process::Command::new("sh").arg("-c").arg(local(&render)).env("JOB_COMPLETION_INDEX", i.to_string()).output().unwrap();
         ok(&out, &format!("pod {i}: {}", local(&render)));
     }
     let out = std::process::Command::new("sh").arg("-c").arg(local(&merge_cmd)).output().unwrap();

@@ -23,7 +23,11 @@ fn wide_tree(rng: &mut SmallRng) -> Shape {
             1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.4)) },
             _ => random_leaf(rng, true),
         };
-        if rng.gen_bool(0.3) { random_xf(rng, s) } else { s }
+        if rng.gen_bool(0.3) {
+            random_xf(rng, s)
+        } else {
+            s
+        }
     };
     let mut kids: Vec<Shape> = (0..n).map(|_| small(rng)).collect();
     // Coincident surfaces: copies of earlier children, and boxes sharing a face.
@@ -87,7 +91,8 @@ fn tile_programs_give_every_ray_the_whole_programs_answer() {
                 // Eight rays inside the tile (corners and edges included).
                 let packet: Vec<Ray> = (0..8)
                     .map(|k| {
-                        let (s, w) = if k < 4 { ((k % 2) as f64, (k / 2) as f64) } else { (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) };
+                        let (s, w) =
+                            if k < 4 { ((k % 2) as f64, (k / 2) as f64) } else { (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) };
                         let dir = (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w;
                         to_ray(o, dir * rng.gen_range(0.5..2.0))
                     })
@@ -153,7 +158,12 @@ fn shadow_tiles_give_every_ray_the_whole_programs_answer() {
                     let r = to_ray(o, dir);
                     let whole = scene.occluded(&r);
                     let tiled = any && scene.occluded_in(&r, &mut scratch, Some(&ts.view()));
-                    assert_eq!(tiled, whole, "seed {seed:#x} case {case} tile {t} ray {k}: {r:?} trees {:?}", trees.iter().map(|t| t.json()).collect::<Vec<_>>());
+                    assert_eq!(
+                        tiled,
+                        whole,
+                        "seed {seed:#x} case {case} tile {t} ray {k}: {r:?} trees {:?}",
+                        trees.iter().map(|t| t.json()).collect::<Vec<_>>()
+                    );
                     blocked += whole as u64;
                     rays += 1;
                 }

@@ -53,5 +53,9 @@ pub(crate) fn early_out() {
 
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
-    EvalCounts { leaves: LEAVES.with(|c| c.replace(0)), wide_children: WIDE.with(|c| c.replace(0)), early_outs: EARLY.with(|c| c.replace(0)) }
+    EvalCounts {
+        leaves: LEAVES.with(|c| c.replace(0)),
+        wide_children: WIDE.with(|c| c.replace(0)),
+        early_outs: EARLY.with(|c| c.replace(0)),
+    }
 }

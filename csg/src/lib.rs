@@ -21,7 +21,7 @@ pub mod program;
 pub mod spans;
 pub mod tile;
 
+pub use counts::{take_eval_counts, EvalCounts};
 pub use program::{first_surface, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 pub use spans::{combine, spill_count, Op, SpanList};
-pub use counts::{take_eval_counts, EvalCounts};
 pub use tile::{TileCounts, TileProgram};

@@ -433,7 +433,11 @@ impl<'a> ProgramBuilder<'a> {
                     polys += poly as u32;
                 }
                 let clip = flat.iter().fold(Aabb::INFINITE, |b, &c| b.intersection(&p.bounds[c as usize]));
-                if half || polys >= 2 { polytope_box(&planes, &clip) } else { clip }
+                if half || polys >= 2 {
+                    polytope_box(&planes, &clip)
+                } else {
+                    clip
+                }
             }
             _ => {
                 let mut half = false;
@@ -449,7 +453,11 @@ impl<'a> ProgramBuilder<'a> {
                 }
             }
         };
-        if bounds.is_empty() { Aabb::EMPTY } else { bounds }
+        if bounds.is_empty() {
+            Aabb::EMPTY
+        } else {
+            bounds
+        }
     }
 
     /// Finishes.
@@ -477,16 +485,7 @@ impl Program {
     /// within a few eps of that limit is not sure: an operand cut short there
     /// ends its span with no surface, and `combine` may fuse that end with a
     /// real boundary of another operand.
-    pub fn eval(
-        &self,
-        leaves: &LeafTable,
-        root: u32,
-        ray: &RayCtx,
-        tmin: f32,
-        tmax: f32,
-        mode: Mode,
-        scratch: &mut Scratch,
-    ) -> f32 {
+    pub fn eval(&self, leaves: &LeafTable, root: u32, ray: &RayCtx, tmin: f32, tmax: f32, mode: Mode, scratch: &mut Scratch) -> f32 {
         scratch.out.clear();
         if self.kind[root as usize] == NodeKind::Leaf {
             let v = leaf_spans(leaves, ray, self.first[root as usize], tmin, tmax, ray.nearest(mode), &mut scratch.out);
@@ -573,15 +572,7 @@ impl Program {
         }
     }
 
-    fn push_frame(
-        &self,
-        node: u32,
-        tmin: f32,
-        tmax: f32,
-        ray: &RayCtx,
-        mode: Mode,
-        scratch: &mut Scratch,
-    ) {
+    fn push_frame(&self, node: u32, tmin: f32, tmax: f32, ray: &RayCtx, mode: Mode, scratch: &mut Scratch) {
         let mut frame = Frame {
             node,
             next: 0,
@@ -921,10 +912,7 @@ impl Program {
                         match k {
                             NodeKind::Union => ch.iter().any(|&c| scratch.bools[c as usize - lo]),
                             NodeKind::Intersection => ch.iter().all(|&c| scratch.bools[c as usize - lo]),
-                            _ => {
-                                scratch.bools[ch[0] as usize - lo]
-                                    && !ch[1..].iter().any(|&c| scratch.bools[c as usize - lo])
-                            }
+                            _ => scratch.bools[ch[0] as usize - lo] && !ch[1..].iter().any(|&c| scratch.bools[c as usize - lo]),
                         }
                     }
                 }
@@ -947,7 +935,6 @@ impl Program {
         }
         lo
     }
-
 }
 
 /// A union in [`Mode::Nearest`] is needed only a little past its first confirmed

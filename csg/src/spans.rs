@@ -103,7 +103,11 @@ impl Op {
 #[inline(always)]
 fn event(l: &[Span], k: usize) -> (f32, Surf) {
     let s = &l[k >> 1];
-    if k & 1 == 0 { (s.t0, s.s0) } else { (s.t1, s.s1) }
+    if k & 1 == 0 {
+        (s.t0, s.s0)
+    } else {
+        (s.t1, s.s1)
+    }
 }
 
 /// Combines two span lists by `op` into `out` (cleared first), regularised:

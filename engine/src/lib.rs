@@ -34,11 +34,16 @@ pub mod scene;
 pub mod tile;
 
 pub use components::*;
-pub use part::{Part, Split};
-pub use render::{encode_depth, encode_pixel, encode_srgb, leaf_id_color, render, render_raw, tile_size, Aov, RawPixels, Camera, CameraRays, Light, RenderSettings, RenderStats};
-pub use tile::{TileScratch, TileStats, TileView};
-pub use scene::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError, Hit, LeafInfo, ObjectInfo, PacketScratch, Ray, RenderScene};
 pub use glam;
 pub use hecs;
+pub use part::{Part, Split};
+pub use render::{
+    encode_depth, encode_pixel, encode_srgb, leaf_id_color, render, render_raw, tile_size, Aov, Camera, CameraRays, Light, RawPixels,
+    RenderSettings, RenderStats,
+};
 pub use rothray_csg as csg;
 pub use rothray_primitives as primitives;
+pub use scene::{
+    bake_scene, find_objects, fingerprint_world, sync_scene, BakeError, Hit, LeafInfo, ObjectInfo, PacketScratch, Ray, RenderScene,
+};
+pub use tile::{TileScratch, TileStats, TileView};

@@ -7,8 +7,8 @@ use rayon::prelude::*;
 use rothray_csg::{take_eval_counts, EvalCounts, Scratch};
 
 use crate::part::Part;
-use crate::scene::{Hit, Ray, RenderScene};
 use crate::render_tile::{render_tile, Frame, Rows, Worker};
+use crate::scene::{Hit, Ray, RenderScene};
 use crate::tile::TileStats;
 use rothray_primitives::frustum::Frustum;
 
@@ -235,7 +235,14 @@ pub(crate) struct Sample {
     pub depth: f32,
 }
 
-pub(crate) fn shade(scene: &RenderScene, s: &RenderSettings, ray: &Ray, hit: Option<Hit>, scratch: &mut Scratch, shadows: &mut u64) -> Sample {
+pub(crate) fn shade(
+    scene: &RenderScene,
+    s: &RenderSettings,
+    ray: &Ray,
+    hit: Option<Hit>,
+    scratch: &mut Scratch,
+    shadows: &mut u64,
+) -> Sample {
     let Some(h) = hit else {
         // AOVs keep black for "no surface" so they can be read back (leaf ids, normals).
         let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
@@ -372,13 +379,15 @@ fn render_impl(
     let nchunks = h.div_ceil(rows);
     let mut dchunks: Vec<Option<&mut [f32]>> =
         if want_depth { depth.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
-    let mut lchunks: Vec<Option<&mut [Vec3]>> = if !lin.is_empty() { lin.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
+    let mut lchunks: Vec<Option<&mut [Vec3]>> =
+        if !lin.is_empty() { lin.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
     let frame = Frame { scene, s, rays, spp, w, flat, normals, bg8 };
     out.par_chunks_mut(w * rows * 3).zip(dchunks.par_iter_mut().zip(lchunks.par_iter_mut())).enumerate().for_each_init(
         || (Worker::default(), Vec::new()),
         |(wk, blocks), (ci, (orows, (drows, lrows)))| {
             let rows_here = orows.len() / (3 * w);
-            let mut part = Rows { y0: chunk_ids[ci] * rows, rows: rows_here, out: orows, depth: drows.as_deref_mut(), lin: lrows.as_deref_mut() };
+            let mut part =
+                Rows { y0: chunk_ids[ci] * rows, rows: rows_here, out: orows, depth: drows.as_deref_mut(), lin: lrows.as_deref_mut() };
             for x0 in (0..w).step_by(tile_w) {
                 render_tile(&frame, wk, &mut part, x0, (x0 + tile_w).min(w), blocks);
             }
@@ -397,12 +406,7 @@ fn render_impl(
         encode_depth(&depth, &mut out);
     }
     let (tiles, eval) = tile_total.into_inner().expect("tile counts");
-    let stats = RenderStats {
-        primary_rays: (w * h) as u64 * spp as u64,
-        shadow_rays: shadow_total.into_inner() as u64,
-        tiles,
-        eval,
-    };
+    let stats = RenderStats { primary_rays: (w * h) as u64 * spp as u64, shadow_rays: shadow_total.into_inner() as u64, tiles, eval };
     (out, lin, depth, stats)
 }
 
@@ -433,7 +437,13 @@ mod tests {
             for k in 0..8 {
                 let r1 = rays.ray(x[k], y[k]);
                 assert_eq!(r8[k].origin, r1.origin);
-                assert_eq!(r8[k].dir.to_array().map(f32::to_bits), r1.dir.to_array().map(f32::to_bits), "case {case} ray {k}: {cam:?} {w}x{h} ({}, {})", x[k], y[k]);
+                assert_eq!(
+                    r8[k].dir.to_array().map(f32::to_bits),
+                    r1.dir.to_array().map(f32::to_bits),
+                    "case {case} ray {k}: {cam:?} {w}x{h} ({}, {})",
+                    x[k],
+                    y[k]
+                );
             }
         }
     }

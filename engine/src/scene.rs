@@ -268,12 +268,20 @@ fn reduce_to_leaf(program: &Program, n: u32, keep: u32) -> Reduced {
         NodeKind::Union => one(ch.iter().map(red).filter(|&r| r != Reduced::Empty).collect::<Vec<_>>().into_iter()),
         NodeKind::Intersection => {
             let rs: Vec<Reduced> = ch.iter().map(red).collect();
-            if rs.is_empty() || rs.contains(&Reduced::Empty) { Reduced::Empty } else { one(rs.into_iter()) }
+            if rs.is_empty() || rs.contains(&Reduced::Empty) {
+                Reduced::Empty
+            } else {
+                one(rs.into_iter())
+            }
         }
         NodeKind::Difference => match ch.first().map(red) {
             None | Some(Reduced::Empty) => Reduced::Empty,
             Some(r) => {
-                if ch[1..].iter().map(red).all(|s| s == Reduced::Empty) { r } else { Reduced::Other }
+                if ch[1..].iter().map(red).all(|s| s == Reduced::Empty) {
+                    r
+                } else {
+                    Reduced::Other
+                }
             }
         },
     }
@@ -546,9 +554,7 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
                         };
                         let idx = pushed.map_err(|err| match err {
                             LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
-                            LeafError::SingularTransform => {
-                                BakeError::SingularTransform { entity: e, name: name_of(world, e) }
-                            }
+                            LeafError::SingularTransform => BakeError::SingularTransform { entity: e, name: name_of(world, e) },
                         })?;
                         leaf_info.push(LeafInfo {
                             entity: e,
@@ -676,7 +682,11 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
             .map(|&l| {
                 use rothray_primitives::table::LeafKind::*;
                 let cheap = matches!(scene.leaves.kind[l as usize], Sphere | Cuboid | Cylinder | Cone | HalfSpace);
-                if cheap { l } else { u32::MAX }
+                if cheap {
+                    l
+                } else {
+                    u32::MAX
+                }
             })
             .collect();
         let owner: Vec<u32> = pm
@@ -684,7 +694,11 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
             .map(|&m| {
                 let oi = scene.leaf_info[m as usize].object;
                 let keep = reduce_to_leaf(&scene.program, scene.objects[oi as usize].root, m) == Reduced::Keep;
-                if keep { oi } else { u32::MAX }
+                if keep {
+                    oi
+                } else {
+                    u32::MAX
+                }
             })
             .collect();
         let mut sub = vec![false; scene.leaves.len()];
@@ -694,8 +708,7 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
         let subtracted: Vec<bool> = rest.iter().map(|&l| sub[l as usize]).collect();
         let cutters: Vec<(u32, Aabb)> =
             exact.iter().zip(&subtracted).zip(&others).filter(|((&l, &s), _)| s && l != u32::MAX).map(|((&l, _), b)| (l, *b)).collect();
-        let cutter_of: Vec<u32> =
-            rest.iter().map(|l| cutters.iter().position(|c| c.0 == *l).map_or(u32::MAX, |p| p as u32)).collect();
+        let cutter_of: Vec<u32> = rest.iter().map(|l| cutters.iter().position(|c| c.0 == *l).map_or(u32::MAX, |p| p as u32)).collect();
         owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner, cutters, cutter_of })
     };
     scene.packet_meshes = pm;
@@ -705,7 +718,11 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
         .map(|o| {
             let b = &o.bounds;
             let useful = subtree_has_mesh(&scene.program, &scene.leaves, o.root) && b.is_finite() && !b.is_empty();
-            if useful { 0.1 * b.diagonal_length() } else { 0.0 }
+            if useful {
+                0.1 * b.diagonal_length()
+            } else {
+                0.0
+            }
         })
         .collect();
     scene.bounds = bounds;
@@ -732,7 +749,11 @@ enum ProgOp {
 
 impl RenderScene {
     fn tolerance_or_default(&self) -> f32 {
-        if self.tolerance > 0.0 { self.tolerance } else { rothray_primitives::sweep::DEFAULT_TOLERANCE }
+        if self.tolerance > 0.0 {
+            self.tolerance
+        } else {
+            rothray_primitives::sweep::DEFAULT_TOLERANCE
+        }
     }
 
     /// Bakes a world into a new scene.
@@ -797,9 +818,8 @@ impl RenderScene {
         // single-ray fuzz: a union's exit at its first operand's end while the
         // second went on). An entry there cannot be: a span starting at the
         // limit has no length.
-        let unsure_exit = f.is_some_and(|(t, _)| {
-            scratch.out.as_slice().first().is_some_and(|s| !s.s0.is_real()) && t >= valid - 16.0 * ctx.eps
-        });
+        let unsure_exit =
+            f.is_some_and(|(t, _)| scratch.out.as_slice().first().is_some_and(|s| !s.s0.is_real()) && t >= valid - 16.0 * ctx.eps);
         if (f.is_none() || unsure_exit) && valid < tmax {
             // Nothing sure before `valid` (a union's entry covered by another
             // operand, a mesh's first span cut away by a difference): redo in
@@ -872,7 +892,14 @@ impl RenderScene {
     /// rays (all inside the region it was prepared for) evaluate the tile's
     /// programs, with the same answers.
     #[doc(hidden)]
-    pub fn intersect_packet_with(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
+    pub fn intersect_packet_with(
+        &self,
+        rays: &[Ray],
+        ps: &mut PacketScratch,
+        out: &mut [Option<Hit>],
+        normals: bool,
+        tile: Option<&TileView>,
+    ) {
         let n = rays.len().min(out.len());
         if n == 0 {
             return;
@@ -966,8 +993,7 @@ impl RenderScene {
         for (j, &m) in self.packet_meshes.iter().enumerate() {
             lanes[j] = memo.lanes(m);
         }
-        let ctx: [RayCtx; 8] =
-            std::array::from_fn(|k| RayCtx { o, d: d[k], inv_d: inv_d[k], eps: eps[k], memo: Some((memo, k)) });
+        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { o, d: d[k], inv_d: inv_d[k], eps: eps[k], memo: Some((memo, k)) });
         for k in 0..8 {
             if left & (1 << k) == 0 {
                 continue;

@@ -183,7 +183,10 @@ fn kind_of(ft: std::fs::FileType) -> &'static str {
 /// `O_NONBLOCK`: opening a FIFO with it returns at once instead of waiting for a
 /// writer. The value is fixed per platform ABI; it is spelled here rather than
 /// pulling in the libc crate for one constant.
-#[cfg(all(any(target_os = "linux", target_os = "android"), not(any(target_arch = "mips", target_arch = "mips64", target_arch = "sparc64"))))]
+#[cfg(all(
+    any(target_os = "linux", target_os = "android"),
+    not(any(target_arch = "mips", target_arch = "mips64", target_arch = "sparc64"))
+))]
 const O_NONBLOCK: i32 = 0o4000;
 #[cfg(any(target_os = "macos", target_os = "ios", target_os = "freebsd", target_os = "openbsd", target_os = "netbsd"))]
 const O_NONBLOCK: i32 = 0x4;
@@ -199,7 +202,10 @@ const O_NOFOLLOW: i32 = 0o100000;
 #[cfg(any(target_os = "macos", target_os = "ios", target_os = "freebsd"))]
 const O_NOFOLLOW: i32 = 0x100;
 #[cfg(not(any(
-    all(any(target_os = "linux", target_os = "android"), any(target_arch = "x86_64", target_arch = "x86", target_arch = "riscv64", target_arch = "aarch64", target_arch = "arm")),
+    all(
+        any(target_os = "linux", target_os = "android"),
+        any(target_arch = "x86_64", target_arch = "x86", target_arch = "riscv64", target_arch = "aarch64", target_arch = "arm")
+    ),
     target_os = "macos",
     target_os = "ios",
     target_os = "freebsd"
@@ -211,7 +217,10 @@ fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
     let mut o = std::fs::OpenOptions::new();
     o.read(true);
     #[cfg(any(
-        all(any(target_os = "linux", target_os = "android"), not(any(target_arch = "mips", target_arch = "mips64", target_arch = "sparc64"))),
+        all(
+            any(target_os = "linux", target_os = "android"),
+            not(any(target_arch = "mips", target_arch = "mips64", target_arch = "sparc64"))
+        ),
         target_os = "macos",
         target_os = "ios",
         target_os = "freebsd",

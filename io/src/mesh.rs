@@ -199,11 +199,7 @@ pub fn load_mesh_data_in(path: &Path, rule: InsideRule, files: &Files) -> Result
 // ---------------------------------------------------------------- OBJ
 
 fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
-    let malformed = |line: usize, message: String| MeshLoadError::Malformed {
-        path: path.into(),
-        place: format!("line {line}"),
-        message,
-    };
+    let malformed = |line: usize, message: String| MeshLoadError::Malformed { path: path.into(), place: format!("line {line}"), message };
     let text = std::str::from_utf8(bytes).map_err(|e| {
         let line = bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;
         malformed(line, "not UTF-8 text".into())
@@ -230,14 +226,13 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     // Faces are triangulated here, not by tobj: see `polygon`.
     let opts = tobj::LoadOptions { triangulate: false, single_index: false, ignore_points: true, ignore_lines: true };
     let (models, _materials) =
-        tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &opts, |_| Err(tobj::LoadError::OpenFileFailed))
-            .map_err(|e| {
-                let (line, msg) = locate_obj_error(text, &e);
-                match line {
-                    Some(line) => malformed(line, msg),
-                    None => MeshLoadError::Malformed { path: path.into(), place: "OBJ".into(), message: msg },
-                }
-            })?;
+        tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &opts, |_| Err(tobj::LoadError::OpenFileFailed)).map_err(|e| {
+            let (line, msg) = locate_obj_error(text, &e);
+            match line {
+                Some(line) => malformed(line, msg),
+                None => MeshLoadError::Malformed { path: path.into(), place: "OBJ".into(), message: msg },
+            }
+        })?;
     let mut warnings = vec![];
     if skipped.0 > 0 || skipped.1 > 0 {
         warnings.push(format!("{}: skipped {} point and {} line elements", path.display(), skipped.0, skipped.1));
@@ -396,8 +391,7 @@ fn locate_obj_error(text: &str, e: &tobj::LoadError) -> (Option<usize>, String) 
 fn first_non_finite_vertex_line(text: &str) -> Option<usize> {
     text.lines().enumerate().find_map(|(i, l)| {
         let mut w = l.split_whitespace();
-        (w.next() == Some("v") && w.take(3).any(|a| a.parse::<f32>().map(|x| !x.is_finite()).unwrap_or(false)))
-            .then_some(i + 1)
+        (w.next() == Some("v") && w.take(3).any(|a| a.parse::<f32>().map(|x| !x.is_finite()).unwrap_or(false))).then_some(i + 1)
     })
 }
 
@@ -429,11 +423,7 @@ struct GltfCtx<'a> {
 }
 
 fn load_gltf(path: &Path, bytes: &[u8], files: &Files) -> Result<LoadedMesh, MeshLoadError> {
-    let malformed = |place: &str, message: String| MeshLoadError::Malformed {
-        path: path.into(),
-        place: place.into(),
-        message,
-    };
+    let malformed = |place: &str, message: String| MeshLoadError::Malformed { path: path.into(), place: place.into(), message };
     if bytes.starts_with(b"glTF") && bytes.get(4..8) == Some(&1u32.to_le_bytes()[..]) {
         return Err(MeshLoadError::Unsupported { path: path.into(), place: "GLB header".into(), what: "glTF 1.0".into() });
     }
@@ -656,9 +646,7 @@ impl GltfCtx<'_> {
                             return Err(MeshLoadError::WrongType {
                                 path: self.path.into(),
                                 place: iplace,
-                                message: format!(
-                                    "indices must be SCALAR of UNSIGNED_BYTE/SHORT/INT, found {d:?} of {t:?}"
-                                ),
+                                message: format!("indices must be SCALAR of UNSIGNED_BYTE/SHORT/INT, found {d:?} of {t:?}"),
                             })
                         }
                     };
@@ -725,11 +713,7 @@ impl GltfCtx<'_> {
     fn accessor(&mut self, a: &gltf::Accessor, place: &str) -> Result<(usize, usize, usize, usize), MeshLoadError> {
         let err = |message: String| MeshLoadError::Malformed { path: self.path.into(), place: place.into(), message };
         if a.sparse().is_some() {
-            return Err(MeshLoadError::Unsupported {
-                path: self.path.into(),
-                place: place.into(),
-                what: "sparse accessors".into(),
-            });
+            return Err(MeshLoadError::Unsupported { path: self.path.into(), place: place.into(), what: "sparse accessors".into() });
         }
         let Some(view) = a.view() else {
             return Err(MeshLoadError::Unsupported {
@@ -763,9 +747,10 @@ impl GltfCtx<'_> {
         }
         let buffer = view.buffer();
         let bi = buffer.index();
-        let vend = vstart.checked_add(vlen).filter(|&e| e <= buffer.length()).ok_or_else(|| {
-            err(format!("bufferView {} ends past the end of buffer {bi} ({} bytes)", view.index(), buffer.length()))
-        })?;
+        let vend = vstart
+            .checked_add(vlen)
+            .filter(|&e| e <= buffer.length())
+            .ok_or_else(|| err(format!("bufferView {} ends past the end of buffer {bi} ({} bytes)", view.index(), buffer.length())))?;
         self.load_buffer(bi)?;
         let data = self.buffers[bi].as_deref().unwrap_or(&[]);
         if data.len() < vend {
@@ -793,19 +778,13 @@ impl GltfCtx<'_> {
             gltf::buffer::Source::Uri(uri) => {
                 if let Some(rest) = uri.strip_prefix("data:") {
                     let Some((_, b64)) = rest.split_once(";base64,") else {
-                        return Err(MeshLoadError::Unsupported {
-                            path: self.path.into(),
-                            place,
-                            what: "data URI without ;base64,".into(),
-                        });
+                        return Err(MeshLoadError::Unsupported { path: self.path.into(), place, what: "data URI without ;base64,".into() });
                     };
-                    base64::engine::general_purpose::STANDARD
-                        .decode(b64.trim_end())
-                        .map_err(|e| MeshLoadError::Malformed {
-                            path: self.path.into(),
-                            place: place.clone(),
-                            message: format!("bad base64 in data URI: {e}"),
-                        })?
+                    base64::engine::general_purpose::STANDARD.decode(b64.trim_end()).map_err(|e| MeshLoadError::Malformed {
+                        path: self.path.into(),
+                        place: place.clone(),
+                        message: format!("bad base64 in data URI: {e}"),
+                    })?
                 } else if uri.contains("://") {
                     return Err(MeshLoadError::Unsupported {
                         path: self.path.into(),

@@ -230,12 +230,26 @@ fn mesh_gltf_errors() {
     // accessor count far beyond the view: must fail before allocating
     cases.push(("count.gltf", ok.replace(r#""count": 8"#, r#""count": 4000000000"#), "do not fit in bufferView"));
     cases.push(("type.gltf", ok.replace(r#""componentType": 5126"#, r#""componentType": 5123"#), "POSITION must be VEC3 of FLOAT"));
-    cases.push(("itype.gltf", ok.replace(r#""componentType": 5123, "count": 36"#, r#""componentType": 5126, "count": 18"#), "indices must be SCALAR"));
+    cases.push((
+        "itype.gltf",
+        ok.replace(r#""componentType": 5123, "count": 36"#, r#""componentType": 5126, "count": 18"#),
+        "indices must be SCALAR",
+    ));
     cases.push(("missing.gltf", cube_json(Some("gone.bin"), bin.len(), pl, il, ""), "missing buffer data"));
     cases.push(("short.gltf", cube_json(Some(&enc(&bin[..40])), bin.len(), pl, il, ""), "declared"));
     cases.push(("b64.gltf", cube_json(Some("data:application/octet-stream;base64,@@@@"), bin.len(), pl, il, ""), "base64"));
     cases.push(("http.gltf", cube_json(Some("http://example.invalid/x.bin"), bin.len(), pl, il, ""), "unsupported"));
-    cases.push(("draco.gltf", cube_json(Some(&uri), bin.len(), pl, il, r#", "extensionsUsed": ["KHR_draco_mesh_compression"], "extensionsRequired": ["KHR_draco_mesh_compression"]"#), "KHR_draco_mesh_compression"));
+    cases.push((
+        "draco.gltf",
+        cube_json(
+            Some(&uri),
+            bin.len(),
+            pl,
+            il,
+            r#", "extensionsUsed": ["KHR_draco_mesh_compression"], "extensionsRequired": ["KHR_draco_mesh_compression"]"#,
+        ),
+        "KHR_draco_mesh_compression",
+    ));
     cases.push(("json.gltf", ok[..ok.len() / 2].to_string(), "JSON"));
     cases.push(("view.gltf", ok.replace(&format!(r#""byteLength": {pl}}}"#), &format!(r#""byteLength": {}}}"#, pl + 4000)), "bufferView"));
     cases.push(("ref.gltf", ok.replace(r#""indices": 1"#, r#""indices": 7"#), "JSON"));

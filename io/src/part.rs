@@ -337,7 +337,10 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged, String> {
             return Err(format!("{name}: damaged header: its settings do not match their hash"));
         }
         if h.count != n {
-            return Err(format!("{name}: part {}/{} of a split into {} parts, but {ref_path} is part {}/{n}", h.index, h.count, h.count, ref_h.index));
+            return Err(format!(
+                "{name}: part {}/{} of a split into {} parts, but {ref_path} is part {}/{n}",
+                h.index, h.count, h.count, ref_h.index
+            ));
         }
         if h.index >= n {
             return Err(format!("{name}: damaged header: part index {} is not below {n}", h.index));

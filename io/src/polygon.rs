@@ -170,10 +170,12 @@ mod tests {
     use super::*;
 
     fn circle(n: usize) -> Vec<Vec3> {
-        (0..n).map(|i| {
-            let a = std::f32::consts::TAU * i as f32 / n as f32;
-            Vec3::new(a.cos(), a.sin(), 0.0)
-        }).collect()
+        (0..n)
+            .map(|i| {
+                let a = std::f32::consts::TAU * i as f32 / n as f32;
+                Vec3::new(a.cos(), a.sin(), 0.0)
+            })
+            .collect()
     }
 
     fn area(pos: &[Vec3], t: &[[u32; 3]]) -> f64 {
@@ -217,10 +219,8 @@ mod tests {
     #[test]
     fn a_non_convex_face_is_ear_clipped_inside_itself() {
         // An L shape, counter-clockwise.
-        let pos: Vec<Vec3> = [[0., 0.], [2., 0.], [2., 1.], [1., 1.], [1., 2.], [0., 2.]]
-            .iter()
-            .map(|p| Vec3::new(p[0], p[1], 0.0))
-            .collect();
+        let pos: Vec<Vec3> =
+            [[0., 0.], [2., 0.], [2., 1.], [1., 1.], [1., 2.], [0., 2.]].iter().map(|p| Vec3::new(p[0], p[1], 0.0)).collect();
         let mut t = Vec::new();
         assert_eq!(triangulate(&pos, &[0, 1, 2, 3, 4, 5], &mut t), Method::EarClipped);
         assert_eq!(t.len(), 4);

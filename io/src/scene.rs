@@ -3,20 +3,20 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::json::{Map, Value};
 use glam::{DMat4, DVec3, Vec3};
 use hecs::{Entity, World};
 use rothray_engine::{
-    Camera, Cone, CsgNode, Cuboid, Cylinder, Frame, GeneralizedCylinder, HalfSpace, InsideRule, Light, Material,
-    MeshData, MeshSolid, Name, ObjectOrder, Op, Profile, Sphere, SweptSphere, Torus, Transform,
+    Camera, Cone, CsgNode, Cuboid, Cylinder, Frame, GeneralizedCylinder, HalfSpace, InsideRule, Light, Material, MeshData, MeshSolid, Name,
+    ObjectOrder, Op, Profile, Sphere, SweptSphere, Torus, Transform,
 };
-use std::collections::HashMap;
-use std::sync::Arc;
 use rothray_primitives::LeafShape;
 use serde::Deserialize;
-use crate::json::{Map, Value};
+use std::collections::HashMap;
+use std::sync::Arc;
 
-use crate::json_path::At;
 use crate::files::{read_user_text, FileError, Files, LoadOptions};
+use crate::json_path::At;
 
 /// A scene file, loaded: settings plus a World holding its solids.
 pub struct SceneFile {
@@ -196,7 +196,11 @@ fn finite_f32(v: &Value) -> Option<f64> {
 }
 
 fn join(at: &str, k: &str) -> String {
-    if at.is_empty() { k.to_string() } else { format!("{at}.{k}") }
+    if at.is_empty() {
+        k.to_string()
+    } else {
+        format!("{at}.{k}")
+    }
 }
 
 fn kind_of(v: &Value) -> &'static str {
@@ -210,8 +214,7 @@ fn kind_of(v: &Value) -> &'static str {
     }
 }
 
-const LEAF_KINDS: &[&str] =
-    &["sphere", "box", "cylinder", "cone", "torus", "plane", "swept_sphere", "generalized_cylinder", "mesh"];
+const LEAF_KINDS: &[&str] = &["sphere", "box", "cylinder", "cone", "torus", "plane", "swept_sphere", "generalized_cylinder", "mesh"];
 const NODE_KINDS: &[&str] = &["union", "intersection", "difference", "transformed"];
 
 /// Loads a scene file (mesh paths are relative to it); the files it names must
@@ -302,9 +305,12 @@ fn parse_scene_inner(text: &str, path: &Path, dir: &Path, files: &Files) -> Resu
     let file = path.display().to_string();
     let mut de = serde_json::Deserializer::from_str(text);
     de.disable_recursion_limit();
-    let root = Value::deserialize(&mut de)
-        .and_then(|v| de.end().map(|_| v))
-        .map_err(|e| SceneError::Json { file: file.clone(), line: e.line(), column: e.column(), message: e.to_string() })?;
+    let root = Value::deserialize(&mut de).and_then(|v| de.end().map(|_| v)).map_err(|e| SceneError::Json {
+        file: file.clone(),
+        line: e.line(),
+        column: e.column(),
+        message: e.to_string(),
+    })?;
     let mut cx = Ctx { file, dir, files, world: World::new(), names: Default::default(), warnings: Vec::new(), meshes: HashMap::new() };
     let res = parse_root(&mut cx, &root, path);
     // Deep trees drop recursively: do it here, on the big stack.
@@ -570,10 +576,8 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &At) -> R<Entity> {
             }
         }
         other => {
-            return cx.err(
-                &kat,
-                format!("unknown shape kind `{other}` (expected one of: {}, {})", LEAF_KINDS.join(", "), NODE_KINDS.join(", ")),
-            )
+            return cx
+                .err(&kat, format!("unknown shape kind `{other}` (expected one of: {}, {})", LEAF_KINDS.join(", "), NODE_KINDS.join(", ")))
         }
     };
     if let Some(n) = name {
@@ -598,10 +602,7 @@ fn parse_leaf(cx: &mut Ctx, kind: &str, body: &Value, at: &str) -> R<LeafShape> 
         }
         "box" => {
             cx.keys(m, at, &["min", "max"], &["min", "max"])?;
-            LeafShape::Cuboid(Cuboid {
-                min: cx.vec3(&m["min"], &f("min"))?.as_vec3(),
-                max: cx.vec3(&m["max"], &f("max"))?.as_vec3(),
-            })
+            LeafShape::Cuboid(Cuboid { min: cx.vec3(&m["min"], &f("min"))?.as_vec3(), max: cx.vec3(&m["max"], &f("max"))?.as_vec3() })
         }
         "cylinder" => {
             cx.keys(m, at, &["a", "b", "radius"], &["a", "b", "radius"])?;

@@ -59,7 +59,11 @@ impl Aabb {
     }
     /// Length of the diagonal (0 for an empty box).
     pub fn diagonal_length(&self) -> f32 {
-        if self.is_empty() { 0.0 } else { (self.max - self.min).length() }
+        if self.is_empty() {
+            0.0
+        } else {
+            (self.max - self.min).length()
+        }
     }
     /// The box of the image of this box under `m` (all eight corners). Infinite boxes
     /// stay infinite.
@@ -96,7 +100,11 @@ impl Aabb {
         let tf = Vec3::select(nan1 | nan2, Vec3::INFINITY, t1.max(t2));
         let t0 = tn.x.max(tn.y).max(tn.z).max(tmin);
         let t1 = tf.x.min(tf.y).min(tf.z).min(tmax);
-        if t0 <= t1 { Some((t0, t1)) } else { None }
+        if t0 <= t1 {
+            Some((t0, t1))
+        } else {
+            None
+        }
     }
 }
 

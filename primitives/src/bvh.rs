@@ -10,9 +10,9 @@
 use glam::Vec3;
 use obvhs::{
     aabb::Aabb as OAabb,
+    bvh2::builder::build_bvh2,
     cwbvh::{builder::build_cwbvh, CwBvh},
     ray::{Ray as ORay, RayHit},
-    bvh2::builder::build_bvh2,
     BvhBuildParams,
 };
 use smallvec::SmallVec;
@@ -398,8 +398,10 @@ mod small_tests {
                     .collect();
                 let bvh = FlatBvh::build(&boxes, 1);
                 for _ in 0..200 {
-                    let o = Vec3::new(rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0)) * if rng.gen_bool(0.3) { 100.0 } else { 1.0 };
-                    let d = (Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) - o * 0.01) * if rng.gen_bool(0.3) { 1e-3 } else { 1.0 };
+                    let o = Vec3::new(rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0))
+                        * if rng.gen_bool(0.3) { 100.0 } else { 1.0 };
+                    let d = (Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) - o * 0.01)
+                        * if rng.gen_bool(0.3) { 1e-3 } else { 1.0 };
                     let (tmin, tmax) = (0.0, if rng.gen_bool(0.5) { 10.0 } else { f32::INFINITY });
                     let mut got = vec![];
                     bvh.traverse(o, d.recip(), tmin, tmax, |p, _| {

@@ -192,8 +192,7 @@ impl GeneralizedCylinder {
                         let (a, b, c, d) = (v[i], v[(i + 1) % m], v[j], v[(j + 1) % m]);
                         if adjacent {
                             // adjacent edges may only share their common vertex
-                            let (shared, other_a, other_b) =
-                                if j == i + 1 { (b, a, d) } else { (a, b, c) };
+                            let (shared, other_a, other_b) = if j == i + 1 { (b, a, d) } else { (a, b, c) };
                             let (ea, eb) = (other_a - shared, other_b - shared);
                             if ea.perp_dot(eb) == 0.0 && ea.dot(eb) > 0.0 {
                                 return Err(err("profile", format!("polygon edges {i} and {j} overlap")));
@@ -248,7 +247,11 @@ impl Prof {
                         inside = !inside;
                     }
                 }
-                if inside { -d2.sqrt() } else { d2.sqrt() }
+                if inside {
+                    -d2.sqrt()
+                } else {
+                    d2.sqrt()
+                }
             }
         }
     }
@@ -348,9 +351,7 @@ impl GSeg {
             return d.normalize();
         }
         let dd = if u < 0.5 { self.d2(u) } else { -self.d2(u) };
-        dd.try_normalize()
-            .or_else(|| (self.at(1.0) - self.at(0.0)).try_normalize())
-            .unwrap_or(DVec3::Z)
+        dd.try_normalize().or_else(|| (self.at(1.0) - self.at(0.0)).try_normalize()).unwrap_or(DVec3::Z)
     }
 }
 
@@ -373,11 +374,7 @@ struct FrameSample {
 fn double_reflect(c0: DVec3, t0: DVec3, x0: DVec3, c1: DVec3, t1: DVec3) -> DVec3 {
     let v1 = c1 - c0;
     let c1l = v1.length_squared();
-    let (xl, tl) = if c1l > 1e-300 {
-        (x0 - v1 * (2.0 / c1l * v1.dot(x0)), t0 - v1 * (2.0 / c1l * v1.dot(t0)))
-    } else {
-        (x0, t0)
-    };
+    let (xl, tl) = if c1l > 1e-300 { (x0 - v1 * (2.0 / c1l * v1.dot(x0)), t0 - v1 * (2.0 / c1l * v1.dot(t0))) } else { (x0, t0) };
     let v2 = t1 - tl;
     let c2 = v2.length_squared();
     let x = if c2 > 1e-300 { xl - v2 * (2.0 / c2 * v2.dot(xl)) } else { xl };
@@ -479,19 +476,7 @@ impl GenCylData {
         let nsamp = ((2.0 * tol.powf(-0.25)).ceil() as usize).clamp(8, 512);
         let frames = build_frames(&segs, nsamp, desc.frame, desc.normal);
         let bvh = (nseg > BVH_MIN_SEGMENTS).then(|| FlatBvh::build(&boxes, 1));
-        Ok(GenCylData {
-            segs,
-            boxes,
-            bounds,
-            bvh,
-            prof,
-            rp,
-            nsamp,
-            frames,
-            twist: (desc.twist_deg as f64).to_radians(),
-            tol,
-            size,
-        })
+        Ok(GenCylData { segs, boxes, bounds, bvh, prof, rp, nsamp, frames, twist: (desc.twist_deg as f64).to_radians(), tol, size })
     }
 
     /// Local bounds: the path's exact box grown by the profile's bounding radius.
@@ -664,7 +649,11 @@ impl GenCylData {
                         if m <= p || m >= q {
                             break;
                         }
-                        if (hd(m) < 0.0) == (f0 < 0.0) { p = m } else { q = m }
+                        if (hd(m) < 0.0) == (f0 < 0.0) {
+                            p = m
+                        } else {
+                            q = m
+                        }
                     }
                     pts[k] = 0.5 * (p + q);
                     break;
@@ -748,22 +737,10 @@ impl GenCylData {
     /// Inside u-runs of a polygon profile within `[u0, u1]` (a range where the
     /// crossing lies within the bounding circle).
     #[allow(clippy::too_many_arguments)]
-    fn march(
-        &self,
-        i: usize,
-        op: DVec3,
-        dn: DVec3,
-        a: &[f64; 3],
-        b: &[f64; 6],
-        u0: f64,
-        u1: f64,
-        runs: &mut SmallVec<[(f64, f64); 4]>,
-    ) {
+    fn march(&self, i: usize, op: DVec3, dn: DVec3, a: &[f64; 3], b: &[f64; 6], u0: f64, u1: f64, runs: &mut SmallVec<[(f64, f64); 4]>) {
         let seg = &self.segs[i];
         let omega = (self.twist / self.segs.len() as f64).abs()
-            + self.frames[i * (self.nsamp + 1)..(i + 1) * (self.nsamp + 1)]
-                .iter()
-                .fold(0.0f64, |m, f| m.max(f.phi.abs()))
+            + self.frames[i * (self.nsamp + 1)..(i + 1) * (self.nsamp + 1)].iter().fold(0.0f64, |m, f| m.max(f.phi.abs()))
                 * self.nsamp as f64;
         // state: (u, local point, signed distance, speed bound of the local point)
         let state = |u: f64| {
@@ -802,7 +779,11 @@ impl GenCylData {
                         break;
                     }
                     let m = state(0.5 * (lo.0 + hi.0));
-                    if (m.2 <= 0.0) == inside { lo = m } else { hi = m }
+                    if (m.2 <= 0.0) == inside {
+                        lo = m
+                    } else {
+                        hi = m
+                    }
                 }
                 if inside {
                     runs.push((start.take().unwrap_or(u0), lo.0));
@@ -895,8 +876,7 @@ impl GenCylData {
         roots[..n].iter().any(|&u| {
             let f = self.frame_at(i, u);
             let q = p - f.c;
-            q.length_squared() <= self.rp * self.rp * (1.0 + 1e-9)
-                && self.prof.contains(DVec2::new(q.dot(f.x), q.dot(f.y)))
+            q.length_squared() <= self.rp * self.rp * (1.0 + 1e-9) && self.prof.contains(DVec2::new(q.dot(f.x), q.dot(f.y)))
         })
     }
 
@@ -952,8 +932,6 @@ impl GenCylData {
     }
 }
 
-
-
 /// Frame samples for all segments (see the module doc).
 fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> Vec<FrameSample> {
     let mut fr: Vec<FrameSample> = Vec::with_capacity(segs.len() * (n + 1));
@@ -990,7 +968,11 @@ fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> V
     let t0 = fr[0].t;
     let start_rmf = || {
         let nv = normal.map(|v| v.as_dvec3().normalize()).unwrap_or_else(|| {
-            if DVec3::Y.dot(t0).abs() > 8f64.to_radians().cos() { DVec3::X } else { DVec3::Y }
+            if DVec3::Y.dot(t0).abs() > 8f64.to_radians().cos() {
+                DVec3::X
+            } else {
+                DVec3::Y
+            }
         });
         (nv - t0 * nv.dot(t0)).try_normalize().unwrap_or_else(|| t0.any_orthonormal_vector())
     };
@@ -1091,10 +1073,24 @@ mod tests {
             ("arc circle", gc(&ARC, Profile::Circle(0.2), Frame::RotationMinimizing, 0.0)),
             ("helix square twist", gc(&helix, sq(0.15), Frame::RotationMinimizing, 90.0)),
             ("bench L frenet", gc(&BENCH_PATH, ell.clone(), Frame::Frenet, 0.0)),
-            ("bench triangle", gc(&BENCH_PATH, Profile::Polygon(vec![[0.0, 0.3], [-0.25, -0.15], [0.25, -0.15]]), Frame::RotationMinimizing, 30.0)),
+            (
+                "bench triangle",
+                gc(&BENCH_PATH, Profile::Polygon(vec![[0.0, 0.3], [-0.25, -0.15], [0.25, -0.15]]), Frame::RotationMinimizing, 30.0),
+            ),
             // profile larger than the radius of curvature: the sweep folds over itself
-            ("folding circle", gc(&[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [0.0, 0.0, 0.2]], Profile::Circle(0.35), Frame::RotationMinimizing, 0.0)),
-            ("folding square", gc(&[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [0.0, 0.0, 0.2]], sq(0.3), Frame::RotationMinimizing, 0.0)),
+            (
+                "folding circle",
+                gc(
+                    &[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [0.0, 0.0, 0.2]],
+                    Profile::Circle(0.35),
+                    Frame::RotationMinimizing,
+                    0.0,
+                ),
+            ),
+            (
+                "folding square",
+                gc(&[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0], [0.0, 0.0, 0.2]], sq(0.3), Frame::RotationMinimizing, 0.0),
+            ),
         ]
     }
 
@@ -1111,7 +1107,11 @@ mod tests {
                 let (mut a, mut b) = (pt, t);
                 for _ in 0..60 {
                     let m = 0.5 * (a + b);
-                    if g.contains_d(o + d * m) == prev { a = m } else { b = m }
+                    if g.contains_d(o + d * m) == prev {
+                        a = m
+                    } else {
+                        b = m
+                    }
                 }
                 out.push(0.5 * (a + b));
             }
@@ -1204,8 +1204,7 @@ mod tests {
             let a = (rand_unit(&mut rng) * rng.gen_range(0.0..2.0)).as_vec3();
             let b = a + (rand_unit(&mut rng) * rng.gen_range(0.2..3.0)).as_vec3();
             let r = rng.gen_range(0.05..1.0f32);
-            let g = GenCylData::new(&gc(&straight(a, b), Profile::Circle(r), Frame::RotationMinimizing, 0.0), DEFAULT_TOLERANCE)
-                .unwrap();
+            let g = GenCylData::new(&gc(&straight(a, b), Profile::Circle(r), Frame::RotationMinimizing, 0.0), DEFAULT_TOLERANCE).unwrap();
             let size = g.local_bounds().diagonal_length() as f64;
             let canon = LeafShape::Cylinder(crate::Cylinder { a, b, radius: r }).canonical();
             let inv = canon.node_from_local.inverse();
@@ -1396,8 +1395,13 @@ mod tests {
                         let u = k as f64 / 400.0;
                         let f = g.frame_at(i, u);
                         assert!(f.c.is_finite() && f.t.is_finite() && f.x.is_finite() && f.y.is_finite(), "{name} {frame:?} u={u}");
-                        let e = (f.x.length() - 1.0).abs().max((f.y.length() - 1.0).abs()).max((f.t.length() - 1.0).abs())
-                            .max(f.x.dot(f.t).abs()).max(f.x.dot(f.y).abs()).max(f.y.dot(f.t).abs())
+                        let e = (f.x.length() - 1.0)
+                            .abs()
+                            .max((f.y.length() - 1.0).abs())
+                            .max((f.t.length() - 1.0).abs())
+                            .max(f.x.dot(f.t).abs())
+                            .max(f.x.dot(f.y).abs())
+                            .max(f.y.dot(f.t).abs())
                             .max((f.x.cross(f.y) - f.t).length());
                         worst_ortho = worst_ortho.max(e);
                         if frame == Frame::RotationMinimizing && k > 0 && k < 400 {

@@ -61,11 +61,7 @@ pub fn cuboid(o: Vec3, d: Vec3, mn: Vec3, mx: Vec3) -> Option<Range> {
         }
         let ta = (mn[a] - o[a]) * inv[a];
         let tb = (mx[a] - o[a]) * inv[a];
-        let (tn, sn, tf, sf) = if ta <= tb {
-            (ta, a as u32 * 2, tb, a as u32 * 2 + 1)
-        } else {
-            (tb, a as u32 * 2 + 1, ta, a as u32 * 2)
-        };
+        let (tn, sn, tf, sf) = if ta <= tb { (ta, a as u32 * 2, tb, a as u32 * 2 + 1) } else { (tb, a as u32 * 2 + 1, ta, a as u32 * 2) };
         if tn > t_in {
             t_in = tn;
             s_in = sn;
@@ -75,18 +71,18 @@ pub fn cuboid(o: Vec3, d: Vec3, mn: Vec3, mx: Vec3) -> Option<Range> {
             s_out = sf;
         }
     }
-    if t_in <= t_out { Some((t_in, s_in, t_out, s_out)) } else { None }
+    if t_in <= t_out {
+        Some((t_in, s_in, t_out, s_out))
+    } else {
+        None
+    }
 }
 
 /// Range of the slab `0 <= z <= 1`.
 #[inline(always)]
 fn slab01(oz: f32, dz: f32) -> Option<Range> {
     if dz == 0.0 {
-        return if (0.0..=1.0).contains(&oz) {
-            Some((f32::NEG_INFINITY, sub::CAP0, f32::INFINITY, sub::CAP1))
-        } else {
-            None
-        };
+        return if (0.0..=1.0).contains(&oz) { Some((f32::NEG_INFINITY, sub::CAP0, f32::INFINITY, sub::CAP1)) } else { None };
     }
     let ta = -oz / dz;
     let tb = (1.0 - oz) / dz;
@@ -97,7 +93,11 @@ fn slab01(oz: f32, dz: f32) -> Option<Range> {
 fn and(a: Range, b: Range) -> Option<Range> {
     let (t0, s0) = if a.0 >= b.0 { (a.0, a.1) } else { (b.0, b.1) };
     let (t1, s1) = if a.2 <= b.2 { (a.2, a.3) } else { (b.2, b.3) };
-    if t0 <= t1 { Some((t0, s0, t1, s1)) } else { None }
+    if t0 <= t1 {
+        Some((t0, s0, t1, s1))
+    } else {
+        None
+    }
 }
 
 /// Unit capped cylinder.
@@ -121,7 +121,11 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
         let c = o.x * o.x + o.y * o.y - 1.0;
         let q = -(b + disc.sqrt().copysign(b));
         let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
-        if t0 <= t1 { (t0, sub::SIDE, t1, sub::SIDE) } else { (t1, sub::SIDE, t0, sub::SIDE) }
+        if t0 <= t1 {
+            (t0, sub::SIDE, t1, sub::SIDE)
+        } else {
+            (t1, sub::SIDE, t0, sub::SIDE)
+        }
     };
     and(side, slab)
 }
@@ -147,11 +151,7 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
             }
         } else {
             let t = -c / (2.0 * b);
-            pieces[0] = Some(if b > 0.0 {
-                (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE)
-            } else {
-                (t, sub::SIDE, f32::INFINITY, sub::SIDE)
-            });
+            pieces[0] = Some(if b > 0.0 { (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE) } else { (t, sub::SIDE, f32::INFINITY, sub::SIDE) });
         }
     } else {
         let disc = b * b - a * c;
@@ -211,11 +211,7 @@ pub fn half_space(o: Vec3, d: Vec3, n: Vec3, offset: f32) -> Option<Range> {
         return if num >= 0.0 { Some((f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE)) } else { None };
     }
     let t = num / den;
-    Some(if den > 0.0 {
-        (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE)
-    } else {
-        (t, sub::SIDE, f32::INFINITY, sub::SIDE)
-    })
+    Some(if den > 0.0 { (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE) } else { (t, sub::SIDE, f32::INFINITY, sub::SIDE) })
 }
 
 /// Is the local point inside the torus (major 1, minor `rho`, axis z)?
@@ -311,7 +307,11 @@ pub fn torus_reference(o: DVec3, d: DVec3, rho: f64, t0: f64, t1: f64, samples: 
             let (mut a, mut b) = (prev_t, t);
             for _ in 0..80 {
                 let m = 0.5 * (a + b);
-                if f(m) == prev { a = m } else { b = m }
+                if f(m) == prev {
+                    a = m
+                } else {
+                    b = m
+                }
             }
             res.push(0.5 * (a + b));
         }

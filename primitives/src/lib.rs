@@ -30,9 +30,7 @@ pub mod table;
 
 pub use aabb::Aabb;
 pub use glam;
-pub use table::{
-    Cone, Cuboid, Cylinder, HalfSpace, LeafError, LeafKind, LeafShape, LeafTable, ShapeError, Sphere, Torus,
-};
+pub use table::{Cone, Cuboid, Cylinder, HalfSpace, LeafError, LeafKind, LeafShape, LeafTable, ShapeError, Sphere, Torus};
 
 /// Identifies the surface a span boundary lies on: a leaf (index, with
 /// [`Surf::FLIP`] set when the surface bounds a subtracted operand, so its normal
@@ -74,7 +72,11 @@ impl Surf {
     /// The same surface with its orientation reversed (clipped ends stay clipped).
     #[inline(always)]
     pub fn flip(self) -> Surf {
-        if self.is_real() { Surf { leaf: self.leaf ^ Self::FLIP, sub: self.sub } } else { self }
+        if self.is_real() {
+            Surf { leaf: self.leaf ^ Self::FLIP, sub: self.sub }
+        } else {
+            self
+        }
     }
 }
 

@@ -367,7 +367,11 @@ impl RayBox {
         }
         let t0 = t1.min(t2).max_element().max(tlo);
         let t1 = t1.max(t2).min_element().min(thi);
-        if t0 - t0.abs() * SLAB_EPS <= t1 + t1.abs() * SLAB_EPS { Some((t0, t1)) } else { None }
+        if t0 - t0.abs() * SLAB_EPS <= t1 + t1.abs() * SLAB_EPS {
+            Some((t0, t1))
+        } else {
+            None
+        }
     }
 }
 
@@ -404,7 +408,11 @@ fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, b
         let f = |p: f32, q: f32, r: f32, s: f32| {
             let x = p as f64 * q as f64 - r as f64 * s as f64;
             let y = x as f32;
-            if y == 0.0 && x != 0.0 { f32::MIN_POSITIVE.copysign(x.signum() as f32) } else { y }
+            if y == 0.0 && x != 0.0 {
+                f32::MIN_POSITIVE.copysign(x.signum() as f32)
+            } else {
+                y
+            }
         };
         u = f(cx, by, cy, bx);
         v = f(ax, cy, ay, cx);
@@ -427,7 +435,11 @@ fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, b
     let bz = sz * b[kz];
     let cz = sz * c[kz];
     let t = (u * az + v * bz + w * cz) / det;
-    if t >= tlo && t <= thi { Some((t, det > 0.0)) } else { None }
+    if t >= tlo && t <= thi {
+        Some((t, det > 0.0))
+    } else {
+        None
+    }
 }
 
 /// Solid angle of triangle `(a, b, c)` seen from the origin (Van Oosterom and
@@ -1071,7 +1083,11 @@ impl MeshData {
                 self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
                 sort_crossings(&mut xs, |_| true);
                 let end_surf = |t: f32, clip: f32| {
-                    if t == clip { Surf::NONE } else { Surf::new(leaf, SUB_BOX) }
+                    if t == clip {
+                        Surf::NONE
+                    } else {
+                        Surf::new(leaf, SUB_BOX)
+                    }
                 };
                 // Walk the pieces between consecutive crossings.
                 let mut inside = false;
@@ -1113,7 +1129,11 @@ impl MeshData {
     /// +1 where a crossing enters the solid (orientation rule), -1 where it leaves.
     #[inline(always)]
     fn sign(&self, c: &Crossing) -> i32 {
-        if c.front == (self.orient > 0.0) { 1 } else { -1 }
+        if c.front == (self.orient > 0.0) {
+            1
+        } else {
+            -1
+        }
     }
 
     /// Sorts crossings by t, entering first on ties (touching pieces merge
@@ -1151,16 +1171,7 @@ impl MeshData {
     /// exact on `[tmin, v]` (none lies past it) and `v` is returned. Falls back to
     /// the full query (returning infinity) where the count at `tmin` is not known
     /// to be zero (the point at `tmin` inside the bounds) or for the winding rule.
-    pub fn spans_nearest<S: SpanSink + ?Sized>(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        tmin: f32,
-        tmax: f32,
-        slack: f32,
-        leaf: u32,
-        out: &mut S,
-    ) -> f32 {
+    pub fn spans_nearest<S: SpanSink + ?Sized>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, slack: f32, leaf: u32, out: &mut S) -> f32 {
         if !(tmax >= tmin) || self.wide.is_empty() {
             return f32::INFINITY;
         }
@@ -1244,13 +1255,7 @@ impl MeshData {
     /// same projection axes need is tested a triangle at a time against all of
     /// them ([`spans_nearest8_sse`](Self::spans_nearest8_sse) never does; both
     /// give the same answers).
-    pub fn spans_nearest8(
-        &self,
-        q: &NearestRays8,
-        active: u32,
-        leaf: u32,
-        out: &mut [Vec<Span>; 8],
-    ) -> (u32, [f32; 8]) {
+    pub fn spans_nearest8(&self, q: &NearestRays8, active: u32, leaf: u32, out: &mut [Vec<Span>; 8]) -> (u32, [f32; 8]) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX.
@@ -1262,25 +1267,13 @@ impl MeshData {
     /// [`spans_nearest8`](Self::spans_nearest8) without the AVX leaf test (what
     /// CPUs without AVX run), for tests: both give the same answers.
     #[doc(hidden)]
-    pub fn spans_nearest8_sse(
-        &self,
-        q: &NearestRays8,
-        active: u32,
-        leaf: u32,
-        out: &mut [Vec<Span>; 8],
-    ) -> (u32, [f32; 8]) {
+    pub fn spans_nearest8_sse(&self, q: &NearestRays8, active: u32, leaf: u32, out: &mut [Vec<Span>; 8]) -> (u32, [f32; 8]) {
         self.spans_nearest8_in::<false>(q, active, leaf, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn spans_nearest8_avx(
-        &self,
-        q: &NearestRays8,
-        active: u32,
-        leaf: u32,
-        out: &mut [Vec<Span>; 8],
-    ) -> (u32, [f32; 8]) {
+    unsafe fn spans_nearest8_avx(&self, q: &NearestRays8, active: u32, leaf: u32, out: &mut [Vec<Span>; 8]) -> (u32, [f32; 8]) {
         self.spans_nearest8_in::<true>(q, active, leaf, out)
     }
 
@@ -1300,7 +1293,11 @@ impl MeshData {
         let stop = |k: usize, t: f32| {
             let c = (t + slack[k]).max(t.next_up());
             let [a, b] = through[k];
-            if t >= a && t <= b { c.max(b) } else { c }
+            if t >= a && t <= b {
+                c.max(b)
+            } else {
+                c
+            }
         };
         let mut cut = [f32::INFINITY; 8];
         if self.wide.is_empty() || self.rule != InsideRule::Orientation {
@@ -1600,7 +1597,11 @@ impl MeshData {
             return best.1;
         }
         let Some(&n) = self.normals.get(slot as usize) else { return Vec3::Y };
-        if sub & SUB_FLIP != 0 { -n } else { n }
+        if sub & SUB_FLIP != 0 {
+            -n
+        } else {
+            n
+        }
     }
 
     /// Topology and volume summary for `rothray check`, with the number of

@@ -47,11 +47,7 @@ pub(crate) fn octasphere(level: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
 pub(crate) fn cube() -> (Vec<Vec3>, Vec<[u32; 3]>) {
     let mut pos = vec![];
     for i in 0..8 {
-        pos.push(Vec3::new(
-            if i & 1 != 0 { 1.0 } else { -1.0 },
-            if i & 2 != 0 { 1.0 } else { -1.0 },
-            if i & 4 != 0 { 1.0 } else { -1.0 },
-        ));
+        pos.push(Vec3::new(if i & 1 != 0 { 1.0 } else { -1.0 }, if i & 2 != 0 { 1.0 } else { -1.0 }, if i & 4 != 0 { 1.0 } else { -1.0 }));
     }
     // quads counter-clockwise seen from outside
     let quads = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
@@ -237,11 +233,7 @@ fn mesh_exact_edge_and_vertex_rays_cube() {
     }
     // Diagonals through opposite corners, in all 8 directions.
     for c in 0..8 {
-        let d = Vec3::new(
-            if c & 1 != 0 { 1.0 } else { -1.0 },
-            if c & 2 != 0 { 1.0 } else { -1.0 },
-            if c & 4 != 0 { 1.0 } else { -1.0 },
-        );
+        let d = Vec3::new(if c & 1 != 0 { 1.0 } else { -1.0 }, if c & 2 != 0 { 1.0 } else { -1.0 }, if c & 4 != 0 { 1.0 } else { -1.0 });
         let o = -2.0 * d;
         check_ray(&m, o, d, Some((&pos, &tris)));
         let xs = m.crossings(o, d, -1e30, 1e30);
@@ -366,8 +358,7 @@ fn mesh_open_and_inconsistent_fall_back_to_winding() {
     let mut rng = SmallRng::seed_from_u64(seed);
     // hemisphere (z >= 0 half of the octasphere): open
     let (pos, tris) = octasphere(3);
-    let half: Vec<[u32; 3]> =
-        tris.iter().copied().filter(|t| t.iter().all(|&k| pos[k as usize].z >= -1e-6)).collect();
+    let half: Vec<[u32; 3]> = tris.iter().copied().filter(|t| t.iter().all(|&k| pos[k as usize].z >= -1e-6)).collect();
     let m = MeshData::new(pos.clone(), half, InsideRule::Orientation).unwrap();
     assert_eq!(m.rule(), InsideRule::Winding);
     assert!(m.warnings()[0].contains("not closed"), "{:?}", m.warnings());
@@ -628,7 +619,15 @@ fn mesh_closest_hit8_matches_single_rays() {
             }
             let os: [Vec3; 8] = std::array::from_fn(|k| if i % 7 == 0 { Vec3::new(0.1 * k as f32 - 0.35, 0.2, 3.0) } else { o });
             let tmin: [f32; 8] = std::array::from_fn(|k| if k == 3 { 0.5 } else { 0.0 });
-            let tmax: [f32; 8] = std::array::from_fn(|k| if k == 5 { 0.9 } else if k == 6 { -1.0 } else { 10.0 });
+            let tmax: [f32; 8] = std::array::from_fn(|k| {
+                if k == 5 {
+                    0.9
+                } else if k == 6 {
+                    -1.0
+                } else {
+                    10.0
+                }
+            });
             let h8 = m.closest_hit8(&os, &d, &tmin, &tmax);
             // The SSE2 node test (machines without AVX) and the AVX one agree exactly.
             assert_eq!(m.closest_hit8_sse(&os, &d, &tmin, &tmax), h8, "{name}: bundle {i}: SSE2 and dispatched packet walks differ");
@@ -681,7 +680,15 @@ fn mesh_spans_nearest8_matches_single_rays() {
                 }
             });
             let tmin: [f32; 8] = std::array::from_fn(|k| if k == 3 { 0.5 } else { 0.0 });
-            let tmax: [f32; 8] = std::array::from_fn(|k| if k == 5 { 0.9 } else if k == 6 { -1.0 } else { 10.0 });
+            let tmax: [f32; 8] = std::array::from_fn(|k| {
+                if k == 5 {
+                    0.9
+                } else if k == 6 {
+                    -1.0
+                } else {
+                    10.0
+                }
+            });
             let slack: [f32; 8] = std::array::from_fn(|k| if k == 2 { 0.0 } else { 1e-4 * k as f32 });
             let active = if i % 13 == 0 { 0b1011_0110 } else { 0xff };
             let mut out: [Vec<Span>; 8] = Default::default();
@@ -747,7 +754,11 @@ fn mesh_spans_nearest8_matches_single_rays() {
                 if let Some(&(t1, ..)) = crossings.first() {
                     if t1 >= through[k][0] && t1 <= through[k][1] {
                         through_held += 1;
-                        assert!(v >= through[k][1].min(tmax[k]), "{name}: bundle {i} ray {k}: cut {v} short of {:?} (first crossing {t1})", through[k]);
+                        assert!(
+                            v >= through[k][1].min(tmax[k]),
+                            "{name}: bundle {i} ray {k}: cut {v} short of {:?} (first crossing {t1})",
+                            through[k]
+                        );
                     }
                 }
             }
@@ -790,7 +801,10 @@ fn mesh_order4_sorts_hit_children() {
         for i in 1..n {
             let (a, b) = (t[order[i - 1] as usize], t[order[i] as usize]);
             // Keys drop the two low mantissa bits: a may exceed b by a few ulps only.
-            assert!(a <= b || (a - b).abs() <= 4.0 * a.abs().max(b.abs()) * f32::EPSILON, "case {case}: t {t:?} hit {hit:#b} order {order:?}");
+            assert!(
+                a <= b || (a - b).abs() <= 4.0 * a.abs().max(b.abs()) * f32::EPSILON,
+                "case {case}: t {t:?} hit {hit:#b} order {order:?}"
+            );
         }
     }
 }

@@ -51,7 +51,17 @@ impl Wide {
         if bin.is_empty() || tris.is_empty() {
             return w;
         }
-        let empty = Node4 { b: [[f32::INFINITY; 4], [f32::NEG_INFINITY; 4], [f32::INFINITY; 4], [f32::NEG_INFINITY; 4], [f32::INFINITY; 4], [f32::NEG_INFINITY; 4]], child: [0; 4] };
+        let empty = Node4 {
+            b: [
+                [f32::INFINITY; 4],
+                [f32::NEG_INFINITY; 4],
+                [f32::INFINITY; 4],
+                [f32::NEG_INFINITY; 4],
+                [f32::INFINITY; 4],
+                [f32::NEG_INFINITY; 4],
+            ],
+            child: [0; 4],
+        };
         let half_area = |n: &BvhNode| {
             let e = n.max - n.min;
             e.x * e.y + e.y * e.z + e.z * e.x
@@ -205,11 +215,7 @@ impl TriRay4 {
     #[inline(always)]
     pub(super) fn new(r: &WoopRay) -> TriRay4 {
         let [kx, ky, kz] = r.k;
-        TriRay4 {
-            k: r.k,
-            o: [Vec4::splat(r.o[kx]), Vec4::splat(r.o[ky]), Vec4::splat(r.o[kz])],
-            s: r.s.map(Vec4::splat),
-        }
+        TriRay4 { k: r.k, o: [Vec4::splat(r.o[kx]), Vec4::splat(r.o[ky]), Vec4::splat(r.o[kz])], s: r.s.map(Vec4::splat) }
     }
 }
 
@@ -349,7 +355,10 @@ impl TriBlock {
             out.zero_any |= bits!(_CMP_EQ_OQ, u, z) | bits!(_CMP_EQ_OQ, vv, z) | bits!(_CMP_EQ_OQ, w, z);
             let det = _mm256_add_ps(_mm256_add_ps(u, vv), w);
             let num = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(u, _mm256_mul_ps(sz, _mm256_set1_ps(az))), _mm256_mul_ps(vv, _mm256_mul_ps(sz, _mm256_set1_ps(bz)))),
+                _mm256_add_ps(
+                    _mm256_mul_ps(u, _mm256_mul_ps(sz, _mm256_set1_ps(az))),
+                    _mm256_mul_ps(vv, _mm256_mul_ps(sz, _mm256_set1_ps(bz))),
+                ),
                 _mm256_mul_ps(w, _mm256_mul_ps(sz, _mm256_set1_ps(cz))),
             );
             let t = _mm256_div_ps(num, det);
@@ -537,7 +546,11 @@ pub(super) fn order4(t: [f32; 4], hit: u32) -> ([u32; 4], usize) {
         let b = t[s].to_bits();
         let ord = b ^ (((b as i32) >> 31) as u32 | 0x8000_0000);
         let key = (ord & !3) | s as u32;
-        if hit & (1 << s) != 0 { key } else { !3 | s as u32 }
+        if hit & (1 << s) != 0 {
+            key
+        } else {
+            !3 | s as u32
+        }
     });
     let mut cx = |i: usize, j: usize| {
         let (a, b) = (k[i], k[j]);

@@ -53,7 +53,6 @@ pub fn roots_in(c: &[f64], lo: f64, hi: f64, out: &mut [f64; MAX_DEGREE]) -> usi
 /// [`roots_in`] with a convergence threshold `eps` on x (the same
 /// derivative isolation, so it never misses a simple root).
 pub fn roots_in_tol(c: &[f64], lo: f64, hi: f64, eps: f64, out: &mut [f64; MAX_DEGREE]) -> usize {
-    
     let mut n = c.len();
     while n > 0 && c[n - 1] == 0.0 {
         n -= 1;
@@ -100,7 +99,11 @@ pub fn roots_in_tol(c: &[f64], lo: f64, hi: f64, eps: f64, out: &mut [f64; MAX_D
             if f == 0.0 {
                 return x;
             }
-            if (f < 0.0) == neg_at_a { a = x } else { b = x }
+            if (f < 0.0) == neg_at_a {
+                a = x
+            } else {
+                b = x
+            }
             let mut nx = x - f / df;
             if !(nx > a && nx < b) {
                 nx = 0.5 * (a + b);
@@ -323,7 +326,11 @@ impl Newton {
         if f == 0.0 {
             return Some(x);
         }
-        if (f < 0.0) == self.neg_at_a { self.a = x } else { self.b = x }
+        if (f < 0.0) == self.neg_at_a {
+            self.a = x
+        } else {
+            self.b = x
+        }
         let (a, b) = (self.a, self.b);
         let mut nx = x - f / df;
         let newton = nx > a && nx < b;
@@ -555,14 +562,7 @@ impl<const N: usize> BernIso<'_, N> {
 /// coefficients' sign pattern is noise over a long range (a polynomial zero up
 /// to rounding) the subdivision budget runs out and the answer is
 /// [`roots_in_tol`]'s.
-pub fn bern_roots<const N: usize>(
-    b: &[f64; N],
-    c: &[f64; N],
-    lo: f64,
-    hi: f64,
-    eps: f64,
-    out: &mut [f64; MAX_DEGREE],
-) -> usize {
+pub fn bern_roots<const N: usize>(b: &[f64; N], c: &[f64; N], lo: f64, hi: f64, eps: f64, out: &mut [f64; MAX_DEGREE]) -> usize {
     if N < 2 || !(lo <= hi) || b.iter().all(|&x| x == 0.0) {
         return 0;
     }

@@ -212,38 +212,31 @@ fn bezier_to_monomial(p: [f64; 4]) -> [f64; 4] {
     [p[0], 3.0 * (p[1] - p[0]), 3.0 * (p[0] - 2.0 * p[1] + p[2]), -p[0] + 3.0 * (p[1] - p[2]) + p[3]]
 }
 
-
 /// f64 -> f32 rounded down / up (so f32 boxes still enclose the f64 ones).
 pub(crate) fn f32_down(x: f64) -> f32 {
     let f = x as f32;
-    if f as f64 > x { f.next_down() } else { f }
+    if f as f64 > x {
+        f.next_down()
+    } else {
+        f
+    }
 }
 pub(crate) fn f32_up(x: f64) -> f32 {
     let f = x as f32;
-    if (f as f64) < x { f.next_up() } else { f }
+    if (f as f64) < x {
+        f.next_up()
+    } else {
+        f
+    }
 }
 
-
 /// Sorts `iv` and pushes the union as sorted disjoint spans (clipped).
-pub(crate) fn push_union<S: SpanSink + ?Sized>(
-    iv: &mut [RawSpan],
-    tmin: f32,
-    tmax: f32,
-    leaf: u32,
-    out: &mut S,
-) {
+pub(crate) fn push_union<S: SpanSink + ?Sized>(iv: &mut [RawSpan], tmin: f32, tmax: f32, leaf: u32, out: &mut S) {
     push_union_slack(iv, 0.0, tmin, tmax, leaf, out)
 }
 
 /// [`push_union`], also merging spans separated by gaps of at most `slack`.
-pub(crate) fn push_union_slack<S: SpanSink + ?Sized>(
-    iv: &mut [RawSpan],
-    slack: f32,
-    tmin: f32,
-    tmax: f32,
-    leaf: u32,
-    out: &mut S,
-) {
+pub(crate) fn push_union_slack<S: SpanSink + ?Sized>(iv: &mut [RawSpan], slack: f32, tmin: f32, tmax: f32, leaf: u32, out: &mut S) {
     if iv.is_empty() {
         return;
     }
@@ -639,7 +632,11 @@ pub(crate) mod tests {
                     let (mut a, mut b) = (t, tn);
                     for _ in 0..64 {
                         let m = 0.5 * (a + b);
-                        if (self.f(o + d * m) <= 0.0) == (f <= 0.0) { a = m } else { b = m }
+                        if (self.f(o + d * m) <= 0.0) == (f <= 0.0) {
+                            a = m
+                        } else {
+                            b = m
+                        }
                     }
                     out.push(0.5 * (a + b));
                 }
@@ -743,8 +740,7 @@ pub(crate) mod tests {
                     // random rays through the box
                     0 => {
                         let o = c + rand_unit(&mut rng) * size;
-                        let tgt = b.min.as_dvec3()
-                            + (b.max - b.min).as_dvec3() * DVec3::new(rng.gen(), rng.gen(), rng.gen());
+                        let tgt = b.min.as_dvec3() + (b.max - b.min).as_dvec3() * DVec3::new(rng.gen(), rng.gen(), rng.gen());
                         (o, (tgt - o).normalize())
                     }
                     // tangent to a ball of the sweep
@@ -753,8 +749,7 @@ pub(crate) mod tests {
                         let (q, r) = bez(&ctrl(&sh, i), rng.gen());
                         let v = rand_unit(&mut rng);
                         let nrm = v.any_orthonormal_vector();
-                        let nrm = (nrm * rng.gen_range(-1.0..1.0) + v.cross(nrm) * rng.gen_range(-1.0..1.0))
-                            .normalize();
+                        let nrm = (nrm * rng.gen_range(-1.0..1.0) + v.cross(nrm) * rng.gen_range(-1.0..1.0)).normalize();
                         let p = q + nrm * r;
                         (p - v * size, v)
                     }
@@ -993,10 +988,7 @@ pub(crate) mod tests {
                     err = err.max((x.t0 - y.t0).abs()).max((x.t1 - y.t1).abs());
                 }
             }
-            println!(
-                "tolerance {tol:e}: {ns:.0} ns/ray (best of 3) over {} rays ({hits} hit), max |dt| vs 1e-12: {err:e}",
-                rays.len()
-            );
+            println!("tolerance {tol:e}: {ns:.0} ns/ray (best of 3) over {} rays ({hits} hit), max |dt| vs 1e-12: {err:e}", rays.len());
         }
     }
 }

@@ -4,7 +4,14 @@ use std::sync::Arc;
 
 use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec4};
 
-use crate::{aabb::Aabb, gcyl::GenCylData, kernels, mesh::{MeshData, NearestRays8}, sweep::SweptSphereData, Span, SpanSink, Surf};
+use crate::{
+    aabb::Aabb,
+    gcyl::GenCylData,
+    kernels,
+    mesh::{MeshData, NearestRays8},
+    sweep::SweptSphereData,
+    Span, SpanSink, Surf,
+};
 
 /// Ball.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -130,10 +137,18 @@ fn err(field: &'static str, message: impl Into<String>) -> ShapeError {
     ShapeError { field, message: message.into() }
 }
 fn finite_v(field: &'static str, v: Vec3) -> Result<(), ShapeError> {
-    if v.is_finite() { Ok(()) } else { Err(err(field, "must be finite")) }
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(err(field, "must be finite"))
+    }
 }
 fn positive(field: &'static str, x: f32) -> Result<(), ShapeError> {
-    if x.is_finite() && x > 0.0 { Ok(()) } else { Err(err(field, format!("must be a positive finite number, got {x}"))) }
+    if x.is_finite() && x > 0.0 {
+        Ok(())
+    } else {
+        Err(err(field, format!("must be a positive finite number, got {x}")))
+    }
 }
 
 /// Two unit vectors completing `w` (unit) to a right-handed orthonormal frame (Duff et al. 2017).
@@ -235,18 +250,12 @@ impl LeafShape {
                 p0: z,
                 p1: z,
             },
-            LeafShape::Cuboid(b) => Canonical {
-                kind: LeafKind::Cuboid,
-                node_from_local: DAffine3::IDENTITY,
-                p0: b.min.extend(0.0),
-                p1: b.max.extend(0.0),
-            },
-            LeafShape::Cylinder(c) => Canonical {
-                kind: LeafKind::Cylinder,
-                node_from_local: axis_frame(c.a, c.b, c.radius as f64),
-                p0: z,
-                p1: z,
-            },
+            LeafShape::Cuboid(b) => {
+                Canonical { kind: LeafKind::Cuboid, node_from_local: DAffine3::IDENTITY, p0: b.min.extend(0.0), p1: b.max.extend(0.0) }
+            }
+            LeafShape::Cylinder(c) => {
+                Canonical { kind: LeafKind::Cylinder, node_from_local: axis_frame(c.a, c.b, c.radius as f64), p0: z, p1: z }
+            }
             LeafShape::Cone(c) => {
                 let rmax = c.radius_a.max(c.radius_b);
                 Canonical {
@@ -262,22 +271,14 @@ impl LeafShape {
                 let r = t.major as f64;
                 Canonical {
                     kind: LeafKind::Torus,
-                    node_from_local: DAffine3::from_mat3_translation(
-                        DMat3::from_cols(u * r, v * r, w * r),
-                        t.center.as_dvec3(),
-                    ),
+                    node_from_local: DAffine3::from_mat3_translation(DMat3::from_cols(u * r, v * r, w * r), t.center.as_dvec3()),
                     p0: Vec4::new(t.minor / t.major, 0.0, 0.0, 0.0),
                     p1: z,
                 }
             }
             LeafShape::HalfSpace(h) => {
                 let l = h.normal.length();
-                Canonical {
-                    kind: LeafKind::HalfSpace,
-                    node_from_local: DAffine3::IDENTITY,
-                    p0: (h.normal / l).extend(h.offset / l),
-                    p1: z,
-                }
+                Canonical { kind: LeafKind::HalfSpace, node_from_local: DAffine3::IDENTITY, p0: (h.normal / l).extend(h.offset / l), p1: z }
             }
         }
     }
@@ -331,7 +332,11 @@ pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
                 if (nn[i].abs() - 1.0).abs() < 1e-12 {
                     // plane through the image of offset * n_local
                     let p = m.transform_point3(c.p0.truncate().as_dvec3() * c.p0.w as f64);
-                    if nn[i] > 0.0 { b.max[i] = p[i] as f32 } else { b.min[i] = p[i] as f32 }
+                    if nn[i] > 0.0 {
+                        b.max[i] = p[i] as f32
+                    } else {
+                        b.min[i] = p[i] as f32
+                    }
                 }
             }
             b
@@ -507,7 +512,16 @@ impl LeafTable {
     /// the answer is the full one).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    pub fn spans_for<S: SpanSink + ?Sized>(&self, i: u32, o: Vec3, d: Vec3, tmin: f32, tmax: f32, nearest: Option<f32>, out: &mut S) -> f32 {
+    pub fn spans_for<S: SpanSink + ?Sized>(
+        &self,
+        i: u32,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        nearest: Option<f32>,
+        out: &mut S,
+    ) -> f32 {
         if let Some(slack) = nearest {
             if self.kind[i as usize] == LeafKind::Mesh {
                 return self.mesh_nearest(i, o, d, tmin, tmax, slack, out);
@@ -533,11 +547,7 @@ impl LeafTable {
         use crate::polytope::Plane;
         let iu = i as usize;
         let m = &self.to_local[iu];
-        let a = glam::DMat3::from_cols(
-            m.matrix3.x_axis.as_dvec3(),
-            m.matrix3.y_axis.as_dvec3(),
-            m.matrix3.z_axis.as_dvec3(),
-        );
+        let a = glam::DMat3::from_cols(m.matrix3.x_axis.as_dvec3(), m.matrix3.y_axis.as_dvec3(), m.matrix3.z_axis.as_dvec3());
         let b = m.translation.as_dvec3();
         // Local plane dot(nl, x) <= w with x = A p + b: dot(A^T nl, p) <= w - dot(nl, b).
         let mut push = |nl: DVec3, w: f64| {
