@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The test command of the README: installs what the tests need (POV-Ray 3.7 and
+# The test command of the README: checks formatting and lints (rustfmt,
+# clippy), installs what the tests need (POV-Ray 3.7 and
 # python3 for the oracle comparison, Debian's assimp test models for the mesh
 # importer corpus) when they are missing, then runs every test of the workspace,
 # then the one-node Slurm test of split rendering (scripts/slurm/test.sh).
@@ -19,6 +20,17 @@ if [ ${#need[@]} -gt 0 ]; then
     echo "scripts/test.sh: could not install ${need[*]}; the POV-Ray test will fail (ROTHRAY_SKIP_POVRAY=1 skips it)" >&2
   }
 fi
+
+# Formatting and lints first (cheap, and they fail fast). The components come
+# with rustup when the toolchain lacks them.
+for c in rustfmt clippy; do
+  if ! cargo "$( [ $c = rustfmt ] && echo fmt || echo clippy )" --version >/dev/null 2>&1; then
+    echo "scripts/test.sh: installing the $c component (rustup)"
+    rustup component add "$c"
+  fi
+done
+cargo fmt --check
+cargo clippy --workspace --all-targets --release -- -D warnings
 
 # Release-mode tests: the oracles trace tens of thousands of rays.
 cargo test --workspace --release "$@"

@@ -485,6 +485,7 @@ impl Program {
     /// within a few eps of that limit is not sure: an operand cut short there
     /// ends its span with no surface, and `combine` may fuse that end with a
     /// real boundary of another operand.
+    #[allow(clippy::too_many_arguments)] // until one `Ray` type carries o, d, tmin, tmax (issue 11)
     pub fn eval(&self, leaves: &LeafTable, root: u32, ray: &RayCtx, tmin: f32, tmax: f32, mode: Mode, scratch: &mut Scratch) -> f32 {
         scratch.out.clear();
         if self.kind[root as usize] == NodeKind::Leaf {

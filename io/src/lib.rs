@@ -7,7 +7,7 @@
 //! * [`part`]: part files of a split render and their merge;
 //! * [`files`]: which files a scene may read (its folder and `--allow-path`
 //!   folders; regular files only), and the record of what a load opened;
-//! * [`write_png`]: images.
+//! * images: [`write_png`].
 #![warn(missing_docs)]
 
 pub mod files;

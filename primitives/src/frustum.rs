@@ -112,7 +112,7 @@ mod tests {
         let seed = 11u64;
         println!("seed {seed}");
         let mut rng = SmallRng::seed_from_u64(seed);
-        let mut v = |r: &mut SmallRng, s: f32| Vec3::new(r.gen_range(-s..s), r.gen_range(-s..s), r.gen_range(-s..s));
+        let v = |r: &mut SmallRng, s: f32| Vec3::new(r.gen_range(-s..s), r.gen_range(-s..s), r.gen_range(-s..s));
         let mut culled = 0;
         for _ in 0..2000 {
             let apex = v(&mut rng, 3.0);

@@ -154,7 +154,7 @@ impl GeneralizedCylinder {
     /// non-zero `normal`, finite `twist_deg`.
     pub fn validate(&self) -> Result<(), ShapeError> {
         let n = self.path.len();
-        if n < 4 || (n - 1) % 3 != 0 {
+        if n < 4 || !(n - 1).is_multiple_of(3) {
             return Err(err("path", format!("length {n} is not 3n+1 (n >= 1)")));
         }
         for (i, p) in self.path.iter().enumerate() {

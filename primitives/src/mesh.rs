@@ -1171,6 +1171,7 @@ impl MeshData {
     /// exact on `[tmin, v]` (none lies past it) and `v` is returned. Falls back to
     /// the full query (returning infinity) where the count at `tmin` is not known
     /// to be zero (the point at `tmin` inside the bounds) or for the winding rule.
+    #[allow(clippy::too_many_arguments)] // until one `Ray` type carries o, d, tmin, tmax (issue 11)
     pub fn spans_nearest<S: SpanSink + ?Sized>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, slack: f32, leaf: u32, out: &mut S) -> f32 {
         if !(tmax >= tmin) || self.wide.is_empty() {
             return f32::INFINITY;

@@ -82,7 +82,7 @@ fn check_ray(m: &MeshData, o: Vec3, d: Vec3, convex: Option<(&[Vec3], &[[u32; 3]
 fn check_ray_closed(m: &MeshData, o: Vec3, d: Vec3, convex: Option<(&[Vec3], &[[u32; 3]])>, closed: bool) -> usize {
     let xs = m.crossings(o, d, -1e30, 1e30);
     if closed {
-        assert!(xs.len() % 2 == 0, "odd crossing count {} for o {o:?} d {d:?}: {xs:?}", xs.len());
+        assert!(xs.len().is_multiple_of(2), "odd crossing count {} for o {o:?} d {d:?}: {xs:?}", xs.len());
         let mut k = 0;
         let mut depth = 0;
         while k < xs.len() {

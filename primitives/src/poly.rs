@@ -757,7 +757,7 @@ mod tests {
             while r.len() < deg {
                 let x: f64 = rng.gen();
                 match rng.gen_range(0..10) {
-                    0 | 1 | 2 => r.push(x),
+                    0..=2 => r.push(x),
                     3 => r.push(rng.gen_range(-0.5..1.5)),
                     4 if r.len() + 2 <= deg => {
                         let s = 10f64.powf(rng.gen_range(-10.0..-6.0));

@@ -94,7 +94,7 @@ impl SweptSphere {
     /// not all zero.
     pub fn validate(&self) -> Result<(), ShapeError> {
         let n = self.bezier.len();
-        if n < 4 || (n - 1) % 3 != 0 {
+        if n < 4 || !(n - 1).is_multiple_of(3) {
             return Err(err(format!("length {n} is not 3n+1 (n >= 1)")));
         }
         for (i, p) in self.bezier.iter().enumerate() {

@@ -403,7 +403,7 @@ impl LeafTable {
 
     fn inverse32(m: &DAffine3) -> Result<Affine3A, LeafError> {
         let det = m.matrix3.determinant();
-        if !(det.is_finite() && det.abs() > 1e-300) || !m.translation.is_finite() {
+        if !det.is_finite() || det.abs() <= 1e-300 || !m.translation.is_finite() {
             return Err(LeafError::SingularTransform);
         }
         let inv = m.inverse();
