@@ -57,8 +57,9 @@ pub(crate) struct Worker {
 
 impl Worker {
     /// Lays out the pixels of the tile `[x0, x1)` x rows `[0, rows)` in blocks
-    /// of 4x2 (a packet each); returns the blocks' `(start, len)`.
-    fn layout(&mut self, x0: usize, x1: usize, rows: usize, blocks: &mut Vec<(usize, usize)>) {
+    /// of 4x2 (a packet each) into `blocks` (`(start, len)`), and, when the
+    /// tile is shaded afterwards (`keep`), clears the per-pixel sums.
+    fn layout(&mut self, x0: usize, x1: usize, rows: usize, blocks: &mut Vec<(usize, usize)>, keep: bool) {
         self.px.clear();
         blocks.clear();
         for r0 in (0..rows).step_by(2) {
@@ -69,6 +70,9 @@ impl Worker {
                     self.px.push((r0 + k / bw, bx + k % bw));
                 }
             }
+        }
+        if !keep {
+            return; // a flat picture writes its pixels as its packets finish
         }
         let n = self.px.len();
         self.acc.clear();
@@ -88,21 +92,16 @@ pub(crate) fn render_tile(f: &Frame, wk: &mut Worker, rows: &mut Rows, x0: usize
         fill_background(f, rows, x0, x1);
         return;
     }
-    wk.layout(x0, x1, nrows, blocks);
+    wk.layout(x0, x1, nrows, blocks, f.flat.is_none());
     let lit = s.aov == Aov::Shaded && !s.lights.is_empty();
     for si in 0..f.spp {
-        camera_rays(f, wk, y0, si, blocks);
-        if f.spp == 1 && wk.hits.iter().all(Option::is_none) {
+        let any = camera_rays(f, wk, rows, si, blocks);
+        if f.flat.is_some() {
+            return; // the pixels are written
+        }
+        if f.spp == 1 && !any {
             // Background only: the pixels are `bg8`, the depths stay infinite.
             fill_background(f, rows, x0, x1);
-            return;
-        }
-        if let Some(flat) = &f.flat {
-            for (k, &(r, x)) in wk.px.iter().enumerate() {
-                let i = r * w + x;
-                let c = wk.hits[k].map_or(f.bg8, |h| flat[h.leaf as usize]);
-                rows.out[3 * i..3 * i + 3].copy_from_slice(&c);
-            }
             return;
         }
         if lit {
@@ -140,9 +139,13 @@ fn fill_background(f: &Frame, rows: &mut Rows, x0: usize, x1: usize) {
     }
 }
 
-/// Sample `si` of every pixel of the tile: camera rays in packets, hits.
-fn camera_rays(f: &Frame, wk: &mut Worker, y0: usize, si: u32, blocks: &[(usize, usize)]) {
+/// Sample `si` of every pixel of the tile: camera rays in packets, hits (kept
+/// for shading; a flat picture writes its pixels at once: copying the rays and
+/// hits was 4% of a frame of scenes/bunny). Returns whether any ray hit.
+fn camera_rays(f: &Frame, wk: &mut Worker, rows: &mut Rows, si: u32, blocks: &[(usize, usize)]) -> bool {
     let view = wk.ts.view();
+    let y0 = rows.y0;
+    let mut any = false;
     for &(start, np) in blocks {
         // Made by `ray8`, four at a time (filling a template array one by one
         // and reading it back stalled on store forwarding). Lanes past `np`
@@ -163,9 +166,23 @@ fn camera_rays(f: &Frame, wk: &mut Worker, y0: usize, si: u32, blocks: &[(usize,
         let rs = f.rays.ray8(&fx, &fy);
         let mut hits = [None; 8];
         f.scene.intersect_packet_with(&rs[..np], &mut wk.ps, &mut hits, f.normals, Some(&view));
+        let hit = hits[..np].iter().any(Option::is_some);
+        any |= hit;
+        if let Some(flat) = &f.flat {
+            for k in 0..np {
+                let (r, x) = wk.px[start + k];
+                let i = r * f.w + x;
+                let c = hits[k].map_or(f.bg8, |h| flat[h.leaf as usize]);
+                if hit || f.bg8 != [0; 3] {
+                    rows.out[3 * i..3 * i + 3].copy_from_slice(&c);
+                }
+            }
+            continue;
+        }
         wk.rays[start..start + np].copy_from_slice(&rs[..np]);
         wk.hits[start..start + np].copy_from_slice(&hits[..np]);
     }
+    any
 }
 
 /// The shaded picture with lights: what `shade` computes per hit, with the
