@@ -52,6 +52,22 @@ fn wide_tree(rng: &mut SmallRng) -> Shape {
     }
 }
 
+/// A random scene: a deep tree (with meshes in every fourth case), up to two
+/// more objects (wide nodes among them), sometimes a ground plane (an
+/// unbounded object). Its mesh files are removed once baked.
+fn random_scene(rng: &mut SmallRng, case: u32) -> (Vec<Shape>, rothray::engine::RenderScene) {
+    let mut trees = vec![random_tree_with(rng, 3, case % 4 == 0)];
+    for _ in 0..rng.gen_range(0..3) {
+        trees.push(if rng.gen_bool(0.5) { wide_tree(rng) } else { random_tree(rng, 2) });
+    }
+    if rng.gen_bool(0.3) {
+        trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(rng, 0.2), d: -1.2 });
+    }
+    let scene = bake(&trees);
+    remove_mesh_files(&trees);
+    (trees, scene)
+}
+
 /// The hit of a ray compared bit for bit, normal included.
 fn key(h: Option<rothray::engine::Hit>) -> Option<(u32, u32, u32, u32, [u32; 3])> {
     h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub, h.normal.to_array().map(f32::to_bits)))
@@ -64,16 +80,7 @@ fn tile_programs_give_every_ray_the_whole_programs_answer() {
         let seed = 0x711e0 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..25 {
-            let mut trees = vec![random_tree_with(&mut rng, 3, case % 4 == 0)];
-            for _ in 0..rng.gen_range(0..3) {
-                trees.push(if rng.gen_bool(0.5) { wide_tree(&mut rng) } else { random_tree(&mut rng, 2) });
-            }
-            if rng.gen_bool(0.3) {
-                // A ground plane: an unbounded object.
-                trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.2 });
-            }
-            let scene = bake(&trees);
-            remove_mesh_files(&trees);
+            let (trees, scene) = random_scene(&mut rng, case);
             let mut ps = PacketScratch::default();
             let mut ts = TileScratch::default();
             for t in 0..12 {
@@ -134,15 +141,7 @@ fn shadow_tiles_give_every_ray_the_whole_programs_answer() {
         let seed = 0x5ad0 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..25 {
-            let mut trees = vec![random_tree_with(&mut rng, 3, case % 4 == 0)];
-            for _ in 0..rng.gen_range(0..3) {
-                trees.push(if rng.gen_bool(0.5) { wide_tree(&mut rng) } else { random_tree(&mut rng, 2) });
-            }
-            if rng.gen_bool(0.3) {
-                trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.2 });
-            }
-            let scene = bake(&trees);
-            remove_mesh_files(&trees);
+            let (trees, scene) = random_scene(&mut rng, case);
             let mut ts = TileScratch::default();
             let mut scratch = rothray::csg::Scratch::default();
             for t in 0..12 {

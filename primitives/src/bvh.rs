@@ -87,34 +87,21 @@ impl FlatBvh {
     /// nodes in `nodes` (inner nodes have children `first` and `first + 1`), for
     /// callers with a traversal of their own (meshes); `traverse` walks it too.
     pub fn build_binary(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
-        if boxes.len() <= max_leaf as usize {
-            return FlatBvh::build(boxes, max_leaf);
-        }
-        let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
-        let mut params = BvhBuildParams::medium_build();
-        params.max_prims_per_leaf = max_leaf.max(1);
-        let mut t = std::time::Duration::ZERO;
-        let b2 = build_bvh2(&oboxes, params, &mut t);
-        let nodes = b2
-            .nodes
-            .iter()
-            .map(|n| {
-                let a = n.aabb();
-                BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
-            })
-            .collect();
-        FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None, boxes: Vec::new() }
+        Self::binary_with(boxes, max_leaf, BvhBuildParams::medium_build())
     }
 
     /// [`FlatBvh::build_binary`] with obvhs' fastest preset: for region
     /// queries (tiles), where a looser tree costs little and the bake of
     /// `scenes/forest` (10 000 boxes) took 50 ms more with the medium preset.
     pub fn build_cull(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
+        Self::binary_with(boxes, max_leaf, BvhBuildParams::fastest_build())
+    }
+
+    fn binary_with(boxes: &[Aabb], max_leaf: u32, mut params: BvhBuildParams) -> FlatBvh {
         if boxes.len() <= max_leaf as usize {
             return FlatBvh::build(boxes, max_leaf);
         }
         let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
-        let mut params = BvhBuildParams::fastest_build();
         params.max_prims_per_leaf = max_leaf.max(1);
         let mut t = std::time::Duration::ZERO;
         let b2 = build_bvh2(&oboxes, params, &mut t);
