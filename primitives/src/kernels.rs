@@ -245,6 +245,13 @@ pub fn torus(o: Vec3, d: Vec3, rho: f32, out: &mut [(f32, f32); 3]) -> usize {
         return 0;
     }
     let h = h2.sqrt() * (1.0 + 1e-9) + 1e-12;
+    // The solid lies in the slab |z| <= rho: a chord of the bounding sphere
+    // that stays outside it meets nothing (no root, no inside), so the quartic
+    // is skipped. (A thin torus fills little of its sphere.)
+    let zr = dn.z.abs() * h;
+    if oc.z - zr > rho * (1.0 + 1e-9) || oc.z + zr < -rho * (1.0 + 1e-9) {
+        return 0;
+    }
     let e = oc.length_squared() + 1.0 - rho * rho;
     let a2 = dn.x * dn.x + dn.y * dn.y;
     let a1 = oc.x * dn.x + oc.y * dn.y;
