@@ -1325,3 +1325,92 @@ impl RenderScene {
         });
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+    use rothray_primitives::table::{LeafShape, Sphere};
+
+    fn object() -> ObjectInfo {
+        ObjectInfo { entity: Entity::DANGLING, name: String::new(), root: 0, bounds: Aabb::EMPTY }
+    }
+
+    /// The replay as it was: every op through `ProgramBuilder::op`, which
+    /// flattens by copying.
+    fn replay_by_copies(ops: &[ProgOp], leaves: &LeafTable, objects: &mut [ObjectInfo]) -> Program {
+        let mut b = ProgramBuilder::new(leaves);
+        let mut vals: Vec<u32> = Vec::new();
+        for op in ops {
+            match *op {
+                ProgOp::Leaf(i) => vals.push(b.leaf(i)),
+                ProgOp::Op(op, n) => {
+                    let at = vals.len() - n as usize;
+                    let node = b.op(op, &vals[at..]);
+                    vals.truncate(at);
+                    vals.push(node);
+                }
+                ProgOp::Root(oi) => objects[oi as usize].root = vals.pop().unwrap(),
+            }
+        }
+        b.finish()
+    }
+
+    /// Random trees (chains of one kind, mixed kinds, one-operand nodes):
+    /// the spliced replay gives every ray the spans of the copying one, and
+    /// its children table stays linear in the leaves on a 1 000-deep chain.
+    #[test]
+    fn replay_flattens_like_the_builder_in_linear_memory() {
+        let seed = 14u64;
+        println!("seed {seed}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..40 {
+            let mut leaves = LeafTable::default();
+            let mut ops = Vec::new();
+            let depth = if case == 0 { 1000 } else { rng.gen_range(1..200) };
+            let same = case < 4;
+            let kinds = [Op::Union, Op::Intersection, Op::Difference];
+            let k0 = kinds[case % 3];
+            // A chain: each level combines the level below (at a random
+            // position) with new leaves.
+            fn level(rng: &mut SmallRng, leaves: &mut LeafTable, ops: &mut Vec<ProgOp>, depth: usize, kind: Option<Op>) {
+                if depth == 0 {
+                    let c = Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5));
+                    let s = LeafShape::Sphere(Sphere { center: c, radius: rng.gen_range(0.3..2.0) });
+                    ops.push(ProgOp::Leaf(leaves.push(&s, &DAffine3::IDENTITY).unwrap()));
+                    return;
+                }
+                let op = kind.unwrap_or([Op::Union, Op::Intersection, Op::Difference][rng.gen_range(0..3)]);
+                let n = if kind.is_some() { 2 } else { rng.gen_range(1..4) };
+                let at = rng.gen_range(0..n);
+                for i in 0..n {
+                    level(rng, leaves, ops, if i == at { depth - 1 } else { 0 }, kind);
+                }
+                ops.push(ProgOp::Op(op, n as u32));
+            }
+            level(&mut rng, &mut leaves, &mut ops, depth, same.then_some(k0));
+            ops.push(ProgOp::Root(0));
+            let (mut a, mut b) = ([object()], [object()]);
+            let pa = replay(&ops, &leaves, &mut a);
+            let pb = replay_by_copies(&ops, &leaves, &mut b);
+            if case == 0 {
+                assert!(pa.children.len() <= 2 * leaves.len(), "{} children for {} leaves", pa.children.len(), leaves.len());
+            }
+            let (ra, rb) = (a[0].root as usize, b[0].root as usize);
+            assert_eq!((pa.kind[ra], pa.count[ra], pa.bounds[ra]), (pb.kind[rb], pb.count[rb], pb.bounds[rb]), "case {case}");
+            let (mut sa, mut sb) = (Scratch::default(), Scratch::default());
+            for _ in 0..50 {
+                let o = Vec3::new(rng.gen_range(-3.0..3.0), rng.gen_range(-3.0..3.0), 5.0);
+                let d = Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), -1.0);
+                let ctx = RayCtx::new(o, d, 1e-5);
+                for mode in [Mode::All, Mode::Nearest] {
+                    let va = pa.eval(&leaves, a[0].root, &ctx, 0.0, f32::INFINITY, mode, &mut sa);
+                    let vb = pb.eval(&leaves, b[0].root, &ctx, 0.0, f32::INFINITY, mode, &mut sb);
+                    assert_eq!(format!("{va:?} {:?}", sa.out.as_slice()), format!("{vb:?} {:?}", sb.out.as_slice()), "case {case}");
+                }
+                let p = o + d * rng.gen_range(0.0..8.0);
+                assert_eq!(pa.contains(&leaves, a[0].root, p, &mut sa), pb.contains(&leaves, b[0].root, p, &mut sb), "case {case}");
+            }
+        }
+    }
+}
