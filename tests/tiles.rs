@@ -56,7 +56,7 @@ fn wide_tree(rng: &mut SmallRng) -> Shape {
 /// more objects (wide nodes among them), sometimes a ground plane (an
 /// unbounded object). Its mesh files are removed once baked.
 fn random_scene(rng: &mut SmallRng, case: u32) -> (Vec<Shape>, rothray::engine::RenderScene) {
-    let mut trees = vec![random_tree_with(rng, 3, case % 4 == 0)];
+    let mut trees = vec![random_tree_with(rng, 3, case.is_multiple_of(4))];
     for _ in 0..rng.gen_range(0..3) {
         trees.push(if rng.gen_bool(0.5) { wide_tree(rng) } else { random_tree(rng, 2) });
     }
