@@ -176,7 +176,8 @@ enum Cmd {
         /// Trace camera rays only (no shadow rays), like POV-Ray at +Q0.
         #[arg(long)]
         no_shadows: bool,
-        /// Print one JSON object as the last line.
+        /// Print one JSON object as the last line (times, rays, and `counters`: what the
+        /// tiles skipped and what the evaluation did in the last render).
         #[arg(long)]
         json: bool,
         /// Time only part I of N of the image (as `render --tile I/N`).
