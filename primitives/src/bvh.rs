@@ -242,37 +242,11 @@ impl FlatBvh {
     }
 
     /// Visits every primitive whose leaf box contains `p` (a superset is fine:
-    /// callers test the primitive itself). Walks a short ray through `p`.
-    pub fn point_query(&self, p: Vec3, mut f: impl FnMut(u32)) {
-        if self.nodes.is_empty() {
-            return;
-        }
-        if self.cw.is_some() {
-            // CwBvh has no point query (and a zero-length ray finds nothing in it:
-            // it culls boxes left before t = 1e-4): test the boxes themselves.
-            for (i, b) in self.boxes.iter().enumerate() {
-                if b.contains(p) {
-                    f(i as u32);
-                }
-            }
-            return;
-        }
-        let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
-        stack.push(0);
-        while let Some(ni) = stack.pop() {
-            let n = &self.nodes[ni as usize];
-            if !Aabb::new(n.min, n.max).contains(p) {
-                continue;
-            }
-            if n.count > 0 {
-                for k in n.first..n.first + n.count {
-                    f(self.prims[k as usize]);
-                }
-            } else {
-                stack.push(n.first);
-                stack.push(n.first + 1);
-            }
-        }
+    /// callers test the primitive itself). A `CwBvh` has no point query (and a
+    /// zero-length ray finds nothing in it: it culls boxes left before t =
+    /// 1e-4), so [`FlatBvh::cull`] tests its boxes themselves.
+    pub fn point_query(&self, p: Vec3, f: impl FnMut(u32)) {
+        self.cull(|b| b.contains(p), f);
     }
 }
 
