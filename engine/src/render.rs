@@ -4,7 +4,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
-use rothray_csg::{take_eval_counts, EvalCounts, Scratch};
+use rothray_csg::{take_eval_counts, EvalCounts};
 
 use crate::part::Part;
 use crate::render_tile::{render_tile, Frame, Rows, Worker};
@@ -235,21 +235,15 @@ pub(crate) struct Sample {
     pub depth: f32,
 }
 
-pub(crate) fn shade(
-    scene: &RenderScene,
-    s: &RenderSettings,
-    ray: &Ray,
-    hit: Option<Hit>,
-    scratch: &mut Scratch,
-    shadows: &mut u64,
-) -> Sample {
+/// One sample of a picture that casts no shadow rays: the AOVs, and the
+/// shaded picture without lights (with lights: `render_tile::shade_lit`,
+/// which traces a tile's shadow rays as bundles).
+pub(crate) fn shade(scene: &RenderScene, s: &RenderSettings, hit: Option<Hit>) -> Sample {
     let Some(h) = hit else {
         // AOVs keep black for "no surface" so they can be read back (leaf ids, normals).
         let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
         return Sample { rgb: bg, depth: f32::INFINITY };
     };
-    // Face the viewer (a ray that starts inside a solid sees its inner side).
-    let n = if h.normal.dot(ray.dir) > 0.0 { -h.normal } else { h.normal };
     let rgb = match s.aov {
         Aov::Id => {
             let c = leaf_id_color(h.leaf);
@@ -258,26 +252,8 @@ pub(crate) fn shade(
         Aov::Normal => h.normal * 0.5 + 0.5,
         Aov::Depth => Vec3::ZERO,
         Aov::Shaded => {
-            let base = scene.leaf_info[h.leaf as usize].color;
-            let mut acc = Vec3::splat(s.ambient);
-            if s.lights.is_empty() {
-                return Sample { rgb: base * acc, depth: h.t };
-            }
-            let p = ray.origin + ray.dir * h.t;
-            let off = (scene.eps * 20.0).max(1e-4 * (1.0 + p.abs().max_element()));
-            for l in &s.lights {
-                let to_l = -l.direction.normalize_or_zero();
-                let c = n.dot(to_l);
-                if c <= 0.0 {
-                    continue;
-                }
-                *shadows += 1;
-                let sr = Ray { origin: p + n * off, dir: to_l, tmin: 0.0, tmax: f32::INFINITY };
-                if !scene.occluded_with(&sr, scratch) {
-                    acc += l.color * c;
-                }
-            }
-            base * acc
+            debug_assert!(s.lights.is_empty(), "lit pictures are shaded by render_tile::shade_lit");
+            scene.leaf_info[h.leaf as usize].color * Vec3::splat(s.ambient)
         }
     };
     Sample { rgb, depth: h.t }

@@ -108,7 +108,7 @@ pub(crate) fn render_tile(f: &Frame, wk: &mut Worker, rows: &mut Rows, x0: usize
             shade_lit(f, wk);
         } else {
             for k in 0..wk.px.len() {
-                let smp = shade(scene, s, &wk.rays[k], wk.hits[k], &mut wk.ps.scratch, &mut wk.shadows);
+                let smp = shade(scene, s, wk.hits[k]);
                 wk.acc[k] += smp.rgb;
                 wk.dmin[k] = wk.dmin[k].min(smp.depth);
             }
