@@ -1,6 +1,7 @@
 //! Counters of what the evaluator did, per thread (for `rothray bench
-//! --json`): a thread-local add per event, about 0.5% of a frame of
-//! scenes/logo (callgrind).
+//! --json`): a thread-local add per event, 0.1% of the instructions of
+//! scenes/logo (callgrind, 480x270, warm-up plus one render: 207.48e6 with
+//! the adds, 207.27e6 without).
 
 use std::cell::Cell;
 
