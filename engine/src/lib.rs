@@ -26,16 +26,20 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod bake;
 pub mod components;
+mod packet;
 pub mod part;
 pub mod render;
 mod render_tile;
 pub mod scene;
 pub mod tile;
 
+pub use bake::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError};
 pub use components::*;
 pub use glam;
 pub use hecs;
+pub use packet::{PacketScratch, PACKET_MESHES};
 pub use part::{Part, Split};
 pub use render::{
     encode_depth, encode_pixel, encode_srgb, leaf_id_color, render, render_raw, tile_size, Aov, Camera, CameraRays, Light, RawPixels,
@@ -43,7 +47,5 @@ pub use render::{
 };
 pub use rothray_csg as csg;
 pub use rothray_primitives as primitives;
-pub use scene::{
-    bake_scene, find_objects, fingerprint_world, sync_scene, BakeError, Hit, LeafInfo, ObjectInfo, PacketScratch, Ray, RenderScene,
-};
+pub use scene::{Hit, LeafInfo, ObjectInfo, Ray, RenderScene};
 pub use tile::{TileScratch, TileStats, TileView};

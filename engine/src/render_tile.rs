@@ -5,8 +5,9 @@
 
 use glam::Vec3;
 
+use crate::packet::PacketScratch;
 use crate::render::{hash2, shade, Aov, CameraRays, RenderSettings};
-use crate::scene::{Hit, PacketScratch, Ray, RenderScene};
+use crate::scene::{Hit, Ray, RenderScene};
 use crate::tile::TileScratch;
 use rothray_primitives::{frustum::Frustum, Aabb};
 
