@@ -505,6 +505,7 @@ mod tests {
     use rand::{rngs::SmallRng, Rng, SeedableRng};
     use rothray_csg::{Mode, RayCtx, Scratch};
     use rothray_primitives::table::{LeafShape, Sphere};
+    use rothray_primitives::Ray;
 
     fn object() -> ObjectInfo {
         ObjectInfo { entity: Entity::DANGLING, name: String::new(), root: 0, bounds: Aabb::EMPTY }
@@ -576,10 +577,10 @@ mod tests {
             for _ in 0..50 {
                 let o = Vec3::new(rng.gen_range(-3.0..3.0), rng.gen_range(-3.0..3.0), 5.0);
                 let d = Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), -1.0);
-                let ctx = RayCtx::new(o, d, 1e-5);
+                let ctx = RayCtx::new(Ray::new(o, d), 1e-5);
                 for mode in [Mode::All, Mode::Nearest] {
-                    let va = pa.eval(&leaves, a[0].root, &ctx, 0.0, f32::INFINITY, mode, &mut sa);
-                    let vb = pb.eval(&leaves, b[0].root, &ctx, 0.0, f32::INFINITY, mode, &mut sb);
+                    let va = pa.eval(&leaves, a[0].root, &ctx, mode, &mut sa);
+                    let vb = pb.eval(&leaves, b[0].root, &ctx, mode, &mut sb);
                     assert_eq!(format!("{va:?} {:?}", sa.out.as_slice()), format!("{vb:?} {:?}", sb.out.as_slice()), "case {case}");
                 }
                 let p = o + d * rng.gen_range(0.0..8.0);
