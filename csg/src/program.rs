@@ -321,6 +321,9 @@ pub struct Scratch {
     pub out: SpanList,
     /// Point-classification values (post-order).
     bools: Vec<bool>,
+    /// A caller's candidate list, `(entry t, id)` (the engine's objects along
+    /// a ray), kept here so that it too is reused from ray to ray.
+    pub cands: Vec<(f32, u32)>,
 }
 
 /// Builds a [`Program`] bottom-up.

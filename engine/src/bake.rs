@@ -310,10 +310,6 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
             unbounded.push(i as u32);
         }
     }
-    let mut bvh = FlatBvh::build(&boxes, 1);
-    for p in bvh.prims.iter_mut() {
-        *p = ids[*p as usize];
-    }
     let mut cull = FlatBvh::build_cull(&boxes, 2);
     for p in cull.prims.iter_mut() {
         *p = ids[*p as usize];
@@ -331,7 +327,6 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
     scene.program = program;
     scene.objects = objects;
     scene.leaf_info = leaf_info;
-    scene.objects_bvh = bvh;
     scene.objects_cull = cull;
     scene.unbounded = unbounded;
     bake_packet_paths(scene);

@@ -66,8 +66,8 @@ pub struct RenderScene {
     pub objects: Vec<ObjectInfo>,
     /// Per leaf: entity, name, colour, object.
     pub leaf_info: Vec<LeafInfo>,
-    pub(crate) objects_bvh: FlatBvh,
-    /// A binary tree over the same boxes, for region queries (tiles).
+    /// A binary tree over the bounded objects' boxes: for region queries (tiles) and
+    /// for the objects along single rays ([`RenderScene::object_candidates`]).
     pub(crate) objects_cull: FlatBvh,
     pub(crate) unbounded: Vec<u32>,
     /// Bounds of the finite objects.
@@ -228,7 +228,9 @@ impl RenderScene {
         let ray = &ctx.ray;
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
-        // Objects in the same order with or without a tile: ties go the same way.
+        // Objects in the same order with or without a tile, so that ties go
+        // the same way: the unbounded ones by index, then the bounded ones
+        // by box entry, then index.
         for &oi in &self.unbounded {
             let Some(obj) = self.obj_ref(oi, tile) else { continue };
             if let Some((t, s)) = self.object_first(obj, &ctx.with_range(ray.tmin, best_t), scratch) {
@@ -238,16 +240,24 @@ impl RenderScene {
                 }
             }
         }
-        self.objects_bvh.traverse(ray.origin, ray.inv_dir, ray.tmin, best_t, |oi, _| {
-            let Some(obj) = self.obj_ref(oi, tile) else { return best_t };
+        let mut cands = std::mem::take(&mut scratch.cands);
+        self.object_candidates(ray, tile, &mut cands);
+        if cands.len() > 1 {
+            cands.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        }
+        for &(t0, oi) in &cands {
+            if t0 > best_t {
+                break; // sorted by entry: no later box reaches the best hit
+            }
+            let Some(obj) = self.obj_ref(oi, tile) else { continue };
             if let Some((t, s)) = self.object_first(obj, &ctx.with_range(ray.tmin, best_t), scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
                 }
             }
-            best_t
-        });
+        }
+        scratch.cands = cands;
         let (oi, s) = best?;
         Some(self.hit_at(ray, oi, best_t, s, normals))
     }
@@ -286,16 +296,37 @@ impl RenderScene {
                 return true;
             }
         }
-        let mut hit = false;
-        self.objects_bvh.traverse(ray.origin, ctx.ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
-            let Some(obj) = self.obj_ref(oi, tile) else { return ray.tmax };
-            if self.object_first(obj, &ctx, scratch).is_some() {
-                hit = true;
-                return f32::NEG_INFINITY;
-            }
-            ray.tmax
-        });
+        let mut cands = std::mem::take(&mut scratch.cands);
+        self.object_candidates(ray, tile, &mut cands);
+        let hit = cands.iter().any(|&(_, oi)| self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, &ctx, scratch).is_some()));
+        scratch.cands = cands;
         hit
+    }
+
+    /// The bounded objects whose boxes the ray's range meets (among those
+    /// the tile's rays can meet), each with its box entry, appended to
+    /// `out`. The same set however it is found, from the tile's list or
+    /// through the objects' tree: the tree's boxes contain their children's
+    /// and the slab test is monotone in the box, so the tree never hides a
+    /// box that [`Aabb::ray_range`] would accept. (Measured with callgrind
+    /// at 480x270 on benches/scenes: capsules (300 objects, 2.8 per tile)
+    /// spent a third of its instructions walking the objects' tree per ray.)
+    pub(crate) fn object_candidates(&self, ray: &Ray, tile: Option<&TileView>, out: &mut Vec<(f32, u32)>) {
+        out.clear();
+        let mut test = |oi: u32| {
+            if let Some((t0, _)) = self.objects[oi as usize].bounds.ray_range(ray.origin, ray.inv_dir, ray.tmin, ray.tmax) {
+                out.push((t0, oi));
+            }
+        };
+        match tile {
+            Some(TileView { bounded: Some(list), .. }) => list.iter().for_each(|&oi| test(oi)),
+            _ => self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
+                if tile.is_none_or(|t| t.root(oi).is_some()) {
+                    test(oi);
+                }
+                ray.tmax
+            }),
+        }
     }
 
     /// The Roth diagram of object `oi` along the ray, clipped to `[tmin, tmax]`.
