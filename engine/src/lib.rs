@@ -27,6 +27,7 @@
 #![warn(missing_docs)]
 
 pub mod bake;
+mod box_list;
 pub mod components;
 mod packet;
 pub mod part;

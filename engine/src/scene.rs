@@ -10,6 +10,7 @@ use hecs::Entity;
 use rothray_csg::{first_surface, Mode, Program, RayCtx, Scratch};
 use rothray_primitives::{bvh::FlatBvh, Aabb, LeafTable, Span, Surf};
 
+use crate::box_list::entry;
 use crate::tile::TileView;
 
 pub use rothray_primitives::Ray;
@@ -313,16 +314,13 @@ impl RenderScene {
     /// spent a third of its instructions walking the objects' tree per ray.)
     pub(crate) fn object_candidates(&self, ray: &Ray, tile: Option<&TileView>, out: &mut Vec<(f32, u32)>) {
         out.clear();
-        let mut test = |oi: u32| {
-            if let Some((t0, _)) = self.objects[oi as usize].bounds.ray_range(ray.origin, ray.inv_dir, ray.tmin, ray.tmax) {
-                out.push((t0, oi));
-            }
-        };
         match tile {
-            Some(TileView { bounded: Some(list), .. }) => list.iter().for_each(|&oi| test(oi)),
+            Some(TileView { bounded: Some(list), .. }) => list.entries(ray, out),
             _ => self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
                 if tile.is_none_or(|t| t.root(oi).is_some()) {
-                    test(oi);
+                    if let Some(t0) = entry(&self.objects[oi as usize].bounds, ray) {
+                        out.push((t0, oi));
+                    }
                 }
                 ray.tmax
             }),

@@ -7,6 +7,7 @@
 use rothray_csg::{Program, TileCounts, TileProgram};
 use rothray_primitives::frustum::Frustum;
 
+use crate::box_list::BoxList;
 use crate::scene::RenderScene;
 
 /// Marks an object the tile's rays cannot meet.
@@ -28,6 +29,8 @@ pub struct TileScratch {
     /// The bounded ones among them, by index, when there are at most
     /// [`OBJECT_LIST`] (else empty, and `listed` is false).
     bounded: Vec<u32>,
+    /// Their boxes, as the rays test them.
+    boxes: BoxList,
     listed: bool,
     /// Program the tables above were made for.
     program_id: u64,
@@ -69,7 +72,7 @@ pub struct TileView<'a> {
     pub prog: &'a Program,
     root_of: &'a [u32],
     /// The bounded objects the tile meets, when it lists them.
-    pub(crate) bounded: Option<&'a [u32]>,
+    pub(crate) bounded: Option<&'a BoxList>,
 }
 
 impl TileView<'_> {
@@ -91,7 +94,7 @@ impl TileView<'_> {
 impl TileScratch {
     /// The view of the tile last prepared.
     pub fn view(&self) -> TileView<'_> {
-        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(self.bounded.as_slice()) }
+        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(&self.boxes) }
     }
 
     /// The counts so far, reset.
@@ -137,6 +140,10 @@ impl RenderScene {
         if ts.listed {
             ts.bounded.extend_from_slice(&ts.live[unbounded..]);
             ts.bounded.sort_unstable();
+        }
+        ts.boxes.clear();
+        for &oi in &ts.bounded {
+            ts.boxes.push(&self.objects[oi as usize].bounds, oi);
         }
         let TileScratch { live, counts, .. } = ts;
         counts.tiles += 1;
