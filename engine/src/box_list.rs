@@ -58,6 +58,16 @@ impl BoxList {
         self.len += 1;
     }
 
+    /// How many boxes.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// The id of the first box (the list must not be empty).
+    pub fn first_id(&self) -> u32 {
+        self.groups[0].id[0]
+    }
+
     /// Appends `(entry, id)` for every box the ray's range meets, in list
     /// order, with the entries [`entry`] gives.
     #[inline]

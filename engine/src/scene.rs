@@ -315,6 +315,9 @@ impl RenderScene {
     pub(crate) fn object_candidates(&self, ray: &Ray, tile: Option<&TileView>, out: &mut Vec<(f32, u32)>) {
         out.clear();
         match tile {
+            // One object needs no order, and its evaluation tests its own
+            // box first: a ray that misses it gets nothing from it either way.
+            Some(TileView { bounded: Some(list), .. }) if list.len() == 1 => out.push((ray.tmin, list.first_id())),
             Some(TileView { bounded: Some(list), .. }) => list.entries(ray, out),
             _ => self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
                 if tile.is_none_or(|t| t.root(oi).is_some()) {
