@@ -344,6 +344,14 @@ impl GSeg {
     }
     /// Unit tangent; where `C' = 0` (coincident control points at an end) the
     /// limit direction from `C''`, else the chord.
+    /// `C(u1) - C(u0)`, accurate to its own size however close `u0` and `u1`
+    /// are (the difference of two evaluations would carry the rounding of the
+    /// points themselves, ~1e-16 of the coefficients, as a chord of any direction).
+    fn chord(&self, u0: f64, u1: f64) -> DVec3 {
+        let (s1, s2) = (u0 + u1, u0 * u0 + u0 * u1 + u1 * u1);
+        let f = |c: &[f64; 4]| (c[1] + c[2] * s1 + c[3] * s2) * (u1 - u0);
+        DVec3::new(f(&self.c[0]), f(&self.c[1]), f(&self.c[2]))
+    }
     fn tangent(&self, u: f64) -> DVec3 {
         let d = self.d1(u);
         let scale = (self.at(1.0) - self.at(0.0)).length_squared().max(1e-300);
@@ -360,25 +368,45 @@ fn eval(c: &[f64], x: f64) -> f64 {
     crate::poly::eval(c, x)
 }
 
-/// One frame sample: point, tangent, x axis, and the extra rotation (radians
-/// about T) from the double-reflected x axis to the next sample's x axis.
+/// One frame sample: segment parameter, tangent, x axis, and the extra rotation
+/// (radians about T) from the double-reflected x axis to the next sample's x axis.
 #[derive(Clone, Copy, Debug)]
 struct FrameSample {
-    c: DVec3,
+    u: f64,
     t: DVec3,
     x: DVec3,
     phi: f64,
 }
 
-/// Double reflection (Wang et al. 2008): carries `x0` from `(c0, t0)` to `(c1, t1)`.
-fn double_reflect(c0: DVec3, t0: DVec3, x0: DVec3, c1: DVec3, t1: DVec3) -> DVec3 {
-    let v1 = c1 - c0;
+/// Double reflection (Wang et al. 2008): carries `x0` at tangent `t0` along the
+/// chord `v1` (from [`GSeg::chord`]) to tangent `t1`. The chord must be exact
+/// to its own size: the first reflection's plane is normal to it, and a chord
+/// of rounding noise (two separately rounded points a zero-length step apart,
+/// as at a joint) turns the frame by up to 180 degrees about the tangent
+/// (issue 15: 0.46 rad after the first joint of a two-segment path). A zero
+/// chord is a zero-length step: the minimal rotation from `t0` to `t1`.
+fn double_reflect(v1: DVec3, t0: DVec3, x0: DVec3, t1: DVec3) -> DVec3 {
     let c1l = v1.length_squared();
-    let (xl, tl) = if c1l > 1e-300 { (x0 - v1 * (2.0 / c1l * v1.dot(x0)), t0 - v1 * (2.0 / c1l * v1.dot(t0))) } else { (x0, t0) };
+    if c1l == 0.0 {
+        return min_rotate(x0, t0, t1);
+    }
+    let (xl, tl) = (x0 - v1 * (2.0 / c1l * v1.dot(x0)), t0 - v1 * (2.0 / c1l * v1.dot(t0)));
     let v2 = t1 - tl;
     let c2 = v2.length_squared();
     let x = if c2 > 1e-300 { xl - v2 * (2.0 / c2 * v2.dot(xl)) } else { xl };
     // re-orthonormalise against rounding
+    (x - t1 * x.dot(t1)).try_normalize().unwrap_or_else(|| t1.any_orthonormal_vector())
+}
+
+/// `x` turned by the smallest rotation that takes the unit `t0` to the unit
+/// `t1` (about `t0 x t1`), made perpendicular to `t1`: the rotation-minimizing
+/// transport across a zero-length step, i.e. a joint of the path (the limit of
+/// a bend of vanishing length; at a tangent-continuous joint it is the identity
+/// up to rounding). Opposite tangents (a cusp) keep `x`.
+fn min_rotate(x: DVec3, t0: DVec3, t1: DVec3) -> DVec3 {
+    let v = t0.cross(t1);
+    let c = t0.dot(t1);
+    let x = if c > -1.0 + 1e-12 { x + v.cross(x) + v.cross(v.cross(x)) / (1.0 + c) } else { x };
     (x - t1 * x.dot(t1)).try_normalize().unwrap_or_else(|| t1.any_orthonormal_vector())
 }
 
@@ -498,7 +526,7 @@ impl GenCylData {
         let fs = &self.frames[i * (n + 1) + k];
         let c = seg.at(u);
         let t = seg.tangent(u);
-        let mut x = double_reflect(fs.c, fs.t, fs.x, c, t);
+        let mut x = double_reflect(seg.chord(fs.u, u), fs.t, fs.x, t);
         if fs.phi != 0.0 {
             x = rotate_about(x, t, lam * fs.phi);
         }
@@ -938,9 +966,18 @@ fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> V
     for s in segs {
         for k in 0..=n {
             let u = k as f64 / n as f64;
-            fr.push(FrameSample { c: s.at(u), t: s.tangent(u), x: DVec3::ZERO, phi: 0.0 });
+            fr.push(FrameSample { u, t: s.tangent(u), x: DVec3::ZERO, phi: 0.0 });
         }
     }
+    // The chord between samples g and h (zero across a joint: the repeated sample).
+    let chord = |g: usize, h: usize| {
+        let u = |g: usize| (g % (n + 1)) as f64 / n as f64;
+        if g / (n + 1) == h / (n + 1) {
+            segs[g / (n + 1)].chord(u(g), u(h))
+        } else {
+            DVec3::ZERO
+        }
+    };
     // Frenet normal per sample where the curvature is defined.
     let frenet: Vec<Option<DVec3>> = if kind == Frame::Frenet {
         segs.iter()
@@ -985,11 +1022,11 @@ fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> V
     // carry backwards to the start (a path that starts straight)
     for g in (0..g0).rev() {
         let (a, b) = (fr[g + 1], fr[g]);
-        fr[g].x = double_reflect(a.c, a.t, a.x, b.c, b.t);
+        fr[g].x = double_reflect(chord(g + 1, g), a.t, a.x, b.t);
     }
     for g in g0 + 1..fr.len() {
         let (a, b) = (fr[g - 1], fr[g]);
-        let xd = double_reflect(a.c, a.t, a.x, b.c, b.t);
+        let xd = double_reflect(chord(g - 1, g), a.t, a.x, b.t);
         let x = match frenet[g] {
             Some(nv) => {
                 if nv.dot(xd) < 0.0 {
@@ -1010,7 +1047,7 @@ fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> V
             continue;
         }
         let (a, b) = (fr[g], fr[g + 1]);
-        let xd = double_reflect(a.c, a.t, a.x, b.c, b.t);
+        let xd = double_reflect(chord(g, g + 1), a.t, a.x, b.t);
         fr[g].phi = xd.cross(b.x).dot(b.t).atan2(xd.dot(b.x));
     }
     fr
@@ -1501,3 +1538,7 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "gcyl_rmf_tests.rs"]
+mod rmf_tests;
