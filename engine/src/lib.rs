@@ -27,6 +27,7 @@
 #![warn(missing_docs)]
 
 pub mod components;
+pub mod knobs;
 pub mod part;
 pub mod render;
 mod render_tile;
@@ -36,6 +37,7 @@ pub mod tile;
 pub use components::*;
 pub use glam;
 pub use hecs;
+pub use knobs::{Knob, Knobs};
 pub use part::{Part, Split};
 pub use render::{
     encode_depth, encode_pixel, encode_srgb, leaf_id_color, render, render_raw, tile_size, Aov, Camera, CameraRays, Light, RawPixels,

@@ -17,6 +17,7 @@ use rothray_primitives::{
 use std::sync::Arc;
 
 use crate::components::*;
+use crate::knobs::Knobs;
 use crate::tile::TileView;
 
 /// A ray `origin + t * dir`, `t` in `[tmin, tmax]` (t is in units of `dir`).
@@ -165,6 +166,11 @@ pub struct RenderScene {
     /// Accuracy knob of the swept-sphere and generalized-cylinder solvers, relative
     /// to each shape's size (default 1e-6; see `rothray bench --tolerances`).
     pub tolerance: f32,
+    /// Per-approximation accuracy settings, read by the bake (`None`: defaults).
+    pub knobs: Knobs,
+    /// The fusing tolerance's growth per unit of a ray origin's distance from
+    /// `center` (set by the bake, see [`RenderScene::ray_ctx`]).
+    eps_far: f32,
     fingerprint: u64,
     /// Mesh leaves that nearest-hit queries ask in nearest mode, traced ahead for
     /// whole packets by [`RenderScene::intersect_packet`] (empty when there are
@@ -519,11 +525,25 @@ enum Visit {
     Exit(Entity, Op, usize),
 }
 
+/// The generalized cylinder of `d` at the scene's tolerance and knobs: the
+/// `gcyl` knob changes the marching and bisection tolerance only, the frame
+/// samples follow the `frame` knob or else the scene tolerance.
+fn gcyl_data(d: &rothray_primitives::gcyl::GeneralizedCylinder, scene: &RenderScene) -> Result<GenCylData, rothray_primitives::ShapeError> {
+    let tol = scene.tolerance_or_default();
+    let samples = match (scene.knobs.frame, scene.knobs.gcyl) {
+        (Some(n), _) => Some(n as usize),
+        (None, Some(_)) => Some(rothray_primitives::gcyl::frame_samples(tol)),
+        (None, None) => None,
+    };
+    GenCylData::with_frame_samples(d, scene.knobs.gcyl.unwrap_or(tol), samples)
+}
+
 /// System: bakes every object of `world` into `scene` (leaf table in pre-order of
 /// the trees, CSG program, BVHs). Iterative, so any nesting depth works.
 pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeError> {
     let roots = find_objects(world);
-    let mut leaves = LeafTable::default();
+    let mut leaves =
+        LeafTable { torus_tol: scene.knobs.torus.unwrap_or(rothray_primitives::kernels::TORUS_TOLERANCE) as f64, ..LeafTable::default() };
     let mut leaf_info = Vec::new();
     let mut objects = Vec::new();
     // Program nodes reference leaves by index; build leaves first in a pass that
@@ -543,14 +563,18 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
                         let pushed = match desc {
                             LeafDesc::Analytic(shape) => leaves.push(&shape, &global),
                             LeafDesc::Swept(d) => {
-                                let data = SweptSphereData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
+                                let data =
+                                    SweptSphereData::new(&d, scene.knobs.sweep.unwrap_or(scene.tolerance_or_default())).map_err(bad)?;
                                 leaves.push_data(&LeafData::SweptSphere(Arc::new(data)), &global)
                             }
                             LeafDesc::GenCyl(d) => {
-                                let data = GenCylData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
+                                let data = gcyl_data(&d, scene).map_err(bad)?;
                                 leaves.push_data(&LeafData::GenCylinder(Arc::new(data)), &global)
                             }
-                            LeafDesc::Mesh(m) => leaves.push_data(&LeafData::Mesh(m), &global),
+                            LeafDesc::Mesh(m) => {
+                                m.set_far_field(scene.knobs.winding.unwrap_or(rothray_primitives::mesh::BETA));
+                                leaves.push_data(&LeafData::Mesh(m), &global)
+                            }
                         };
                         let idx = pushed.map_err(|err| match err {
                             LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
@@ -704,7 +728,12 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
         })
         .collect();
     scene.bounds = bounds;
-    scene.eps = 1e-5 * diag;
+    // The fusing tolerance: 1e-5 of the scene's size, and 2e-6 of a ray origin's
+    // distance from it (f32 rounding of the crossings grows with both); the
+    // `fuse` knob scales both (README: the curve on scenes/coincident.json).
+    let fuse = scene.knobs.fuse.unwrap_or(1e-5);
+    scene.eps = fuse * diag;
+    scene.eps_far = 0.2 * fuse;
     scene.center = if bounds.is_empty() { Vec3::ZERO } else { bounds.center() };
     scene.bake_count += 1;
     Ok(())
@@ -863,7 +892,7 @@ impl RenderScene {
     #[inline]
     fn eps_at(&self, o: Vec3) -> f32 {
         let far = (o - self.center).length();
-        self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 }
+        self.eps + self.eps_far * if far.is_finite() { far } else { 0.0 }
     }
 
     /// True when every object has finite bounds (no half-space reaches infinity).

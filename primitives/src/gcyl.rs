@@ -428,6 +428,13 @@ pub struct FrameAt {
     pub y: DVec3,
 }
 
+/// Frame samples per segment at a tolerance: `clamp(2 tolerance^(-1/4), 8,
+/// 512)` (the frame error is `O(N^-4)`), 64 at the default.
+pub fn frame_samples(tolerance: f32) -> usize {
+    let tol = (tolerance as f64).clamp(1e-12, 1e-2);
+    ((2.0 * tol.powf(-0.25)).ceil() as usize).clamp(8, 512)
+}
+
 /// A baked generalized cylinder. Immutable, `Send + Sync`.
 #[derive(Clone, Debug)]
 pub struct GenCylData {
@@ -455,7 +462,17 @@ impl GenCylData {
     /// in distance along the ray) and the minimum marching step
     /// (`sqrt(tolerance) * R`).
     pub fn new(desc: &GeneralizedCylinder, tolerance: f32) -> Result<Self, ShapeError> {
+        Self::with_frame_samples(desc, tolerance, None)
+    }
+
+    /// [`GenCylData::new`] with `samples` frame samples per segment (2 to
+    /// 65536) instead of the tolerance's: the `frame` knob of `rothray bench
+    /// --knob`.
+    pub fn with_frame_samples(desc: &GeneralizedCylinder, tolerance: f32, samples: Option<usize>) -> Result<Self, ShapeError> {
         desc.validate()?;
+        if samples.is_some_and(|n| !(2..=65536).contains(&n)) {
+            return Err(err("frame_samples", format!("must be 2 to 65536, got {}", samples.unwrap_or(0))));
+        }
         if !(tolerance.is_finite() && tolerance > 0.0) {
             return Err(err("tolerance", format!("must be positive, got {tolerance}")));
         }
@@ -501,7 +518,7 @@ impl GenCylData {
             boxes.push(b);
         }
         let size = bounds.diagonal_length() as f64;
-        let nsamp = ((2.0 * tol.powf(-0.25)).ceil() as usize).clamp(8, 512);
+        let nsamp = samples.unwrap_or_else(|| frame_samples(tolerance));
         let frames = build_frames(&segs, nsamp, desc.frame, desc.normal);
         let bvh = (nseg > BVH_MIN_SEGMENTS).then(|| FlatBvh::build(&boxes, 1));
         Ok(GenCylData { segs, boxes, bounds, bvh, prof, rp, nsamp, frames, twist: (desc.twist_deg as f64).to_radians(), tol, size })

@@ -259,9 +259,10 @@ fn issue15_reproducer_matches_oracle() {
     let ang = worst_frame_angle(&g, &o, 200);
     println!("issue 15 path: worst frame angle {ang:e} rad");
     assert!(ang < 1e-6, "frame drifts by {ang} rad");
+    // The issue's ray, as `trace` reads it (f64 text rounded to f32).
     let (of, df) = (
-        Vec3::new(12.333760464816386, -0.9212136467628258, -10.956556751596601),
-        Vec3::new(-7.2826926607742575, 2.40286682089548, 5.812184696584759),
+        DVec3::new(12.333760464816386, -0.9212136467628258, -10.956556751596601).as_vec3(),
+        DVec3::new(-7.2826926607742575, 2.40286682089548, 5.812184696584759).as_vec3(),
     );
     let mut got: Vec<Span> = vec![];
     g.spans(of, df, 0.0, f32::INFINITY, 0, &mut got);

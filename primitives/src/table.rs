@@ -377,6 +377,9 @@ pub struct LeafTable {
     pub gcyls: Vec<Arc<GenCylData>>,
     /// Distinct meshes (a mesh under many transforms is stored once).
     pub meshes: Vec<Arc<MeshData>>,
+    /// Polish tolerance of the torus roots (see [`kernels::torus_tol`]; 0, the
+    /// default, is full f64 precision).
+    pub torus_tol: f64,
 }
 
 impl LeafTable {
@@ -481,7 +484,7 @@ impl LeafTable {
             LeafKind::HalfSpace => kernels::half_space(lo, ld, self.p0[iu].truncate(), self.p0[iu].w),
             LeafKind::Torus => {
                 let mut buf = [(0.0f32, 0.0f32); 3];
-                let n = kernels::torus(lo, ld, self.p0[iu].x, &mut buf);
+                let n = kernels::torus_tol(lo, ld, (self.p0[iu].x, self.torus_tol), &mut buf);
                 for &(a, b) in &buf[..n] {
                     push_clipped(out, a, Surf::new(i, 0), b, Surf::new(i, 0), tmin, tmax);
                 }
