@@ -13,7 +13,8 @@ pub struct Knobs {
     pub gcyl: Option<f32>,
     /// Rotation-minimizing (and Frenet) frame samples per segment.
     pub frame: Option<u32>,
-    /// Torus root polish tolerance, relative to its outer radius (0: full f64).
+    /// Torus root polish tolerance, relative to its outer radius (0: full f64;
+    /// `None`: [`rothray_primitives::kernels::TORUS_TOLERANCE`]).
     pub torus: Option<f32>,
     /// Mesh winding number far-field acceptance ratio (node radii; infinity:
     /// the exact sum).
