@@ -620,6 +620,14 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
         });
     }
     let program = replay(&ops, &leaves, &mut objects);
+    // A half-space keeps its offset relative to a point near its object (its
+    // plane's point nearest the object's centre), not near the world origin.
+    for (li, info) in leaf_info.iter().enumerate() {
+        let b = objects[info.object as usize].bounds;
+        if b.is_finite() && !b.is_empty() {
+            leaves.reanchor(li as u32, b.center());
+        }
+    }
     // Objects BVH over the bounded objects.
     let mut boxes = Vec::new();
     let mut ids = Vec::new();
@@ -653,7 +661,10 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
             }
         }
     }
-    let diag = if bounds.is_empty() { 1.0 } else { bounds.diagonal_length().max(1e-3) };
+    // No floor on the size: a floor of 1e-3 made the fusing tolerance 1% of a
+    // scene 1e-6 across (tests/stress.rs, octahedron at scale 1e-6).
+    let diag = if bounds.is_empty() { 1.0 } else { bounds.diagonal_length() };
+    let diag = if diag > 0.0 && diag.is_finite() { diag } else { 1.0 };
     scene.leaves = leaves;
     scene.program = program;
     scene.objects = objects;

@@ -30,6 +30,13 @@ pub type Range = (f32, u32, f32, u32);
 /// Gems, ch. 7), which keeps small, distant spheres accurate in f32.
 #[inline(always)]
 pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
+    // In f64 (the f32 inputs are exact there): a grazing ray's chord comes from
+    // 1 - |f|^2, and f32 rounding of f (relative to |o|, several radii) lost
+    // chords up to ~1e-3 of the radius: 8-13 of 160 rays of tests/stress.rs
+    // had the wrong span count and ends off by 9e-5 of the view distance. f64
+    // also keeps |d|^2 of directions scaled by 1e-24 or 1e20 from under- or
+    // overflowing.
+    let (o, d) = (o.as_dvec3(), d.as_dvec3());
     let a = d.length_squared();
     let b = o.dot(d);
     let f = o - d * (b / a);
@@ -41,7 +48,7 @@ pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
     let q = -(b + disc.sqrt().copysign(b));
     let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
     let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
-    Some((t0, sub::SIDE, t1, sub::SIDE))
+    Some((t0 as f32, sub::SIDE, t1 as f32, sub::SIDE))
 }
 
 /// Axis-aligned box `[mn, mx]`; sub = axis * 2 + (1 for the max face).
@@ -111,6 +118,9 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
         }
         (f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE)
     } else {
+        // In f64, as the sphere (grazing chords, extreme direction scales).
+        let (o, d) = (o.as_dvec3(), d.as_dvec3());
+        let a = d.x * d.x + d.y * d.y;
         let b = o.x * d.x + o.y * d.y;
         let fx = o.x - d.x * (b / a);
         let fy = o.y - d.y * (b / a);
@@ -121,6 +131,7 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
         let c = o.x * o.x + o.y * o.y - 1.0;
         let q = -(b + disc.sqrt().copysign(b));
         let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
+        let (t0, t1) = (t0 as f32, t1 as f32);
         if t0 <= t1 {
             (t0, sub::SIDE, t1, sub::SIDE)
         } else {
@@ -134,6 +145,10 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
 #[inline(always)]
 pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
     let slab = slab01(o.z, d.z)?;
+    // The quadratic in f64 (the f32 inputs are exact there): in f32 its
+    // cancellation near the apex put span ends 1.3e-5 of the view distance off
+    // (tests/stress.rs, cone with an apex, sizes 1e-6 and 1e3).
+    let (o, d, ra, rb) = (o.as_dvec3(), d.as_dvec3(), ra as f64, rb as f64);
     let k = rb - ra;
     let w0 = ra + k * o.z; // radius at the origin's height
     let wd = k * d.z;
@@ -150,7 +165,7 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
                 pieces[0] = Some(full);
             }
         } else {
-            let t = -c / (2.0 * b);
+            let t = (-c / (2.0 * b)) as f32;
             pieces[0] = Some(if b > 0.0 { (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE) } else { (t, sub::SIDE, f32::INFINITY, sub::SIDE) });
         }
     } else {
@@ -165,6 +180,7 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
             if t0 > t1 {
                 std::mem::swap(&mut t0, &mut t1);
             }
+            let (t0, t1) = (t0 as f32, t1 as f32);
             if a > 0.0 {
                 pieces[0] = Some((t0, sub::SIDE, t1, sub::SIDE));
             } else {
@@ -186,7 +202,7 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
                 (false, true) => r.2,
                 _ => 0.0,
             };
-            if w0 + wd * tm < -1e-6 {
+            if w0 + wd * (tm as f64) < -1e-6 {
                 continue;
             }
             out = Some(match out {
