@@ -113,9 +113,12 @@ struct Stats {
     rays: usize,
     /// Largest span end error / view over all rays with the model's span count.
     max_err: f64,
-    /// The same over span ends of chords at least 1e-3 of the view long (a
-    /// chord's end moves as 1 / its length under the f32 rounding of the
-    /// ray and of the leaf's map: tangent rays are ill-conditioned).
+    /// The same over span ends of chords at least 2e-3 of the view long. A
+    /// chord's end moves as 1 / its length under the f32 rounding of the ray
+    /// and of the leaf's map: the sphere's map alone (1/r in f32, 6e-8
+    /// relative) moves the ends of a chord of length L by about 6e-8 r^2 /
+    /// (L / 2), 5e-6 of the view at L = 1e-3 of the view here (measured:
+    /// 1.03e-5 at offset 1e3 with chords from 1e-3 of the view).
     max_err_long: f64,
     /// Rays with a wrong span count, chords < 1e-4 of the view set aside.
     topo: usize,
@@ -184,7 +187,7 @@ fn measure(shape: &Shape, c: DVec3, s: f64, seed: u64) -> Stats {
             let e = (a - b).abs() * dl / view;
             st.max_err = st.max_err.max(e);
             let chord = if i % 2 == 0 { w[i + 1] - w[i] } else { w[i] - w[i - 1] };
-            if chord * dl >= 1e-3 * view {
+            if chord * dl >= 2e-3 * view {
                 st.max_err_long = st.max_err_long.max(e);
             }
         }
@@ -200,7 +203,7 @@ fn table() -> Vec<(String, String, Stats)> {
     let mut cases: Vec<(String, DVec3, f64)> = [0.0, 1e3, 1e4, 1e5, 1e6].iter().map(|&o| (format!("offset {o:e}"), dir * o, 1.0)).collect();
     cases.extend([1e-6, 1e-3, 1e3, 1e6].iter().map(|&s| (format!("scale {s:e}"), DVec3::ZERO, s)));
     let mut rows = vec![];
-    println!("| solid | where | max end error / view | same, chords >= 1e-3 view | wrong span count (chords >= 1e-4 / 4e-4 of the view) |");
+    println!("| solid | where | max end error / view | same, chords >= 2e-3 view | wrong span count (chords >= 1e-4 / 4e-4 of the view) |");
     println!("|---|---|---|---|---|");
     for (ci, (label, c, s)) in cases.iter().enumerate() {
         for (ki, (name, shape)) in solids(*c, *s).into_iter().enumerate() {

@@ -30,13 +30,6 @@ pub type Range = (f32, u32, f32, u32);
 /// Gems, ch. 7), which keeps small, distant spheres accurate in f32.
 #[inline(always)]
 pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
-    // In f64 (the f32 inputs are exact there): a grazing ray's chord comes from
-    // 1 - |f|^2, and f32 rounding of f (relative to |o|, several radii) lost
-    // chords up to ~1e-3 of the radius: 8-13 of 160 rays of tests/stress.rs
-    // had the wrong span count and ends off by 9e-5 of the view distance. f64
-    // also keeps |d|^2 of directions scaled by 1e-24 or 1e20 from under- or
-    // overflowing.
-    let (o, d) = (o.as_dvec3(), d.as_dvec3());
     let a = d.length_squared();
     let b = o.dot(d);
     let f = o - d * (b / a);
@@ -48,7 +41,7 @@ pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
     let q = -(b + disc.sqrt().copysign(b));
     let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
     let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
-    Some((t0 as f32, sub::SIDE, t1 as f32, sub::SIDE))
+    Some((t0, sub::SIDE, t1, sub::SIDE))
 }
 
 /// Axis-aligned box `[mn, mx]`; sub = axis * 2 + (1 for the max face).
@@ -118,9 +111,6 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
         }
         (f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE)
     } else {
-        // In f64, as the sphere (grazing chords, extreme direction scales).
-        let (o, d) = (o.as_dvec3(), d.as_dvec3());
-        let a = d.x * d.x + d.y * d.y;
         let b = o.x * d.x + o.y * d.y;
         let fx = o.x - d.x * (b / a);
         let fy = o.y - d.y * (b / a);
@@ -131,7 +121,6 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
         let c = o.x * o.x + o.y * o.y - 1.0;
         let q = -(b + disc.sqrt().copysign(b));
         let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
-        let (t0, t1) = (t0 as f32, t1 as f32);
         if t0 <= t1 {
             (t0, sub::SIDE, t1, sub::SIDE)
         } else {

@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec4};
+use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec3A, Vec4};
 
 use crate::{
     aabb::Aabb,
@@ -370,7 +370,8 @@ pub struct LeafTable {
     /// the map's translation stays small. With the translation of the whole
     /// map instead, a unit cylinder 1e5 from the origin lost 3e-3 of the view
     /// distance to cancellation (tests/stress.rs).
-    pub anchor: Vec<Vec3>,
+    /// (`Vec3A`: the subtraction is one SIMD operation on the hot path.)
+    pub anchor: Vec<Vec3A>,
     /// Kind-specific parameters.
     pub p0: Vec<Vec4>,
     /// Kind-specific parameters.
@@ -433,7 +434,7 @@ impl LeafTable {
     /// The local point of world point `p` in leaf `i`'s frame.
     #[inline(always)]
     fn local_point(&self, i: usize, p: Vec3) -> Vec3 {
-        self.to_local[i].transform_point3(p - self.anchor[i])
+        self.to_local[i].transform_point3a(Vec3A::from(p) - self.anchor[i]).into()
     }
 
     /// Adds a leaf with shared data, placed by `world_from_node`; returns its index.
@@ -466,7 +467,7 @@ impl LeafTable {
         let i = self.kind.len() as u32;
         self.kind.push(kind);
         self.to_local.push(inv32);
-        self.anchor.push(anchor);
+        self.anchor.push(anchor.into());
         self.p0.push(Vec4::ZERO);
         self.p1.push(Vec4::ZERO);
         self.bounds.push(local.transformed(&m32));
@@ -518,7 +519,7 @@ impl LeafTable {
         let i = self.kind.len() as u32;
         self.kind.push(c.kind);
         self.to_local.push(inv32);
-        self.anchor.push(anchor);
+        self.anchor.push(anchor.into());
         self.p0.push(p0);
         self.p1.push(p1);
         self.bounds.push(bounds);
@@ -532,7 +533,7 @@ impl LeafTable {
     pub fn spans<S: SpanSink + ?Sized>(&self, i: u32, o: Vec3, d: Vec3, tmin: f32, tmax: f32, out: &mut S) {
         let iu = i as usize;
         let m = &self.to_local[iu];
-        let lo = m.transform_point3(o - self.anchor[iu]);
+        let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
         let ld = m.transform_vector3(d);
         let r = match self.kind[iu] {
             LeafKind::Sphere => kernels::sphere(lo, ld),
@@ -598,7 +599,8 @@ impl LeafTable {
         let iu = i as usize;
         let m = &self.to_local[iu];
         let mesh = &self.meshes[self.ext[iu] as usize];
-        mesh.spans_nearest(m.transform_point3(o - self.anchor[iu]), m.transform_vector3(d), tmin, tmax, slack, i, out)
+        let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
+        mesh.spans_nearest(lo, m.transform_vector3(d), tmin, tmax, slack, i, out)
     }
 
     /// Appends the world planes of leaf `i` when it is a polytope (a half-space:
@@ -610,7 +612,7 @@ impl LeafTable {
         let m = &self.to_local[iu];
         let a = glam::DMat3::from_cols(m.matrix3.x_axis.as_dvec3(), m.matrix3.y_axis.as_dvec3(), m.matrix3.z_axis.as_dvec3());
         let b = m.translation.as_dvec3();
-        let c = self.anchor[iu].as_dvec3();
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
         // Local plane dot(nl, x) <= w with x = A (p - c) + b:
         // dot(A^T nl, p) <= w - dot(nl, b) + dot(A^T nl, c).
         let mut push = |nl: DVec3, w: f64| {
@@ -651,7 +653,7 @@ impl LeafTable {
         let m = &self.to_local[iu];
         let a = glam::DMat3::from_cols(m.matrix3.x_axis.as_dvec3(), m.matrix3.y_axis.as_dvec3(), m.matrix3.z_axis.as_dvec3());
         let (nl, w) = (self.p0[iu].truncate().as_dvec3(), self.p0[iu].w as f64);
-        let c = self.anchor[iu].as_dvec3();
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
         // World plane: dot(n, p - c) <= w with n = A^T nl.
         let n = a.transpose() * nl;
         let nn = n.length_squared();
@@ -664,7 +666,7 @@ impl LeafTable {
             return;
         }
         self.p0[iu].w = (w - n.dot(c2.as_dvec3() - c)) as f32;
-        self.anchor[iu] = c2;
+        self.anchor[iu] = c2.into();
     }
 
     /// Is leaf `i` a triangle mesh?
@@ -684,7 +686,7 @@ impl LeafTable {
         }
         let m = &self.to_local[iu];
         let dl: [Vec3; 8] = std::array::from_fn(|k| m.transform_vector3(q.d[k]));
-        let local = NearestRays8 { o: m.transform_point3(q.o - self.anchor[iu]), d: &dl, ..*q };
+        let local = NearestRays8 { o: m.transform_point3a(Vec3A::from(q.o) - self.anchor[iu]).into(), d: &dl, ..*q };
         self.meshes[self.ext[iu] as usize].spans_nearest8(&local, active, i, out)
     }
 
