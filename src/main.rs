@@ -1,5 +1,7 @@
 //! The `rothray` command line (see README.md and docs/scene-format.md).
 
+mod bench_knob;
+
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -9,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use rothray_engine::{render, render_raw, Aov, Part, RenderScene, RenderSettings, Split};
+use rothray_engine::{render, render_raw, Aov, Knob, Part, RenderScene, RenderSettings, Split};
 use rothray_io::{load_scene_with, SceneFile};
 
 #[derive(Parser)]
@@ -186,12 +188,18 @@ enum Cmd {
         /// How --tile deals rows out to the parts.
         #[arg(long, value_enum, default_value = "interleaved")]
         split: SplitArg,
-        /// Run time against error: a comma-separated list of solver tolerances
-        /// (swept spheres, generalized cylinders); prints trace time and the
-        /// max / RMS error of t against tolerance 1e-12, per tolerance.
+        /// Run time against error for one approximation: sweep, gcyl, frame,
+        /// torus, winding or fuse (README, "Run time against error"); its
+        /// default range unless --tolerances gives the settings.
+        #[arg(long)]
+        knob: Option<String>,
+        /// Run time against error: a comma-separated list of settings of
+        /// --knob, or without it of the solver tolerance (swept spheres,
+        /// generalized cylinders); prints trace time and the max / RMS error of
+        /// t against the finest setting (tolerance 1e-12), per setting.
         #[arg(long, value_delimiter = ',')]
-        tolerances: Vec<f32>,
-        /// With --tolerances: write the curve as an SVG plot here.
+        tolerances: Vec<f64>,
+        /// With --knob or --tolerances: write the curve as an SVG plot here.
         #[arg(long)]
         plot: Option<PathBuf>,
     },
@@ -447,9 +455,17 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Cmd::Check { mesh, json, files } => check_mesh(&mesh, json, &files),
-        Cmd::Bench { scene, image, repeats, json, tolerances, plot, files, .. } if !tolerances.is_empty() => {
+        Cmd::Bench { scene, image, repeats, json, knob, tolerances, plot, files, .. } if knob.is_some() || !tolerances.is_empty() => {
+            let knob = match knob {
+                Some(k) => Some(Knob::parse(&k).ok_or_else(|| {
+                    let names: Vec<&str> = Knob::ALL.iter().map(|k| k.name()).collect();
+                    BadInput(format!("--knob {k}: unknown; the knobs are {}", names.join(", ")))
+                })?),
+                None => None,
+            };
             let sf = load_scene_with(&scene, &files.options()).map_err(|e| BadInput(e.to_string()))?;
-            bench_tolerances(&sf, image, repeats, &tolerances, plot.as_deref(), json)
+            let run = bench_knob::KnobRun { knob, values: &tolerances, image, repeats, plot: plot.as_deref(), json };
+            bench_knob::bench_knob(&sf, &run)
         }
         Cmd::Bench { scene, image, repeats, json, no_shadows, tile, split, files, .. } => {
             let (sf, rs, bake) = load(&scene, &files)?;
@@ -608,113 +624,5 @@ fn check_mesh(path: &Path, json: bool, files: &FileArgs) -> Result<()> {
     for w in &r.warnings {
         println!("warning                {w}");
     }
-    Ok(())
-}
-
-/// `bench --tolerances`: run time against error for the solver tolerance.
-fn bench_tolerances(sf: &SceneFile, image: ImageArgs, repeats: u32, tols: &[f32], plot: Option<&Path>, json: bool) -> Result<()> {
-    use rothray_engine::{bake_scene, Ray};
-    let scene = sf.path.as_path();
-    // One sample per pixel: the error is measured per camera ray.
-    let s = settings(sf, ImageArgs { spp: 1, ..image }, Aov::Depth)?;
-    for &t in tols {
-        if !(t.is_finite() && t > 0.0) {
-            return Err(BadInput(format!("--tolerances: {t} is not a positive number")).into());
-        }
-    }
-    let cam = sf.camera.rays(s.width, s.height);
-    // Error rays: a grid of camera rays (every 4th pixel each way).
-    let rays: Vec<Ray> = (0..s.height)
-        .step_by(4)
-        .flat_map(|y| (0..s.width).step_by(4).map(move |x| (x, y)))
-        .map(|(x, y)| cam.ray(x as f32 + 0.5, y as f32 + 0.5))
-        .collect();
-    let trace = |rs: &RenderScene| {
-        let mut out = vec![None; rays.len()];
-        rs.intersect_bundle(&rays, &mut out);
-        out.iter().map(|h| h.map(|h| h.t)).collect::<Vec<Option<f32>>>()
-    };
-    let mut rs = RenderScene::default();
-    rs.tolerance = 1e-12;
-    bake_scene(&sf.world, &mut rs).map_err(|e| BadInput(e.to_string()))?;
-    let reference = trace(&rs);
-    let size = rs.bounds.diagonal_length().max(1e-6) as f64;
-    let mut rows = Vec::new();
-    println!("scene {} ({}x{}), error rays {}, reference: tolerance 1e-12", scene.display(), s.width, s.height, rays.len());
-    println!("{:>10} {:>12} {:>12} {:>12} {:>10}", "tolerance", "trace_s", "max_err", "rms_err", "hit_diff");
-    for &tol in tols {
-        let mut rs = RenderScene::default();
-        rs.tolerance = tol;
-        bake_scene(&sf.world, &mut rs).map_err(|e| BadInput(e.to_string()))?;
-        let _ = render(&rs, &sf.camera, &s, &|_, _| {});
-        let mut times = Vec::new();
-        for _ in 0..repeats.max(1) {
-            let t0 = Instant::now();
-            let _ = render(&rs, &sf.camera, &s, &|_, _| {});
-            times.push(t0.elapsed().as_secs_f64());
-        }
-        times.sort_by(f64::total_cmp);
-        let med = times[times.len() / 2];
-        let got = trace(&rs);
-        let (mut max, mut sq, mut n, mut diff) = (0.0f64, 0.0f64, 0usize, 0usize);
-        for (a, b) in got.iter().zip(reference.iter()) {
-            match (a, b) {
-                (Some(a), Some(b)) => {
-                    let e = (*a as f64 - *b as f64).abs() / size;
-                    max = max.max(e);
-                    sq += e * e;
-                    n += 1;
-                }
-                (None, None) => {}
-                _ => diff += 1,
-            }
-        }
-        let rms = if n > 0 { (sq / n as f64).sqrt() } else { 0.0 };
-        println!("{tol:>10.0e} {med:>12.5} {max:>12.3e} {rms:>12.3e} {diff:>10}");
-        rows.push((tol, med, max, rms, diff));
-    }
-    if let Some(p) = plot {
-        plot_curve(p, scene, &rows).with_context(|| format!("cannot write {}", p.display()))?;
-        println!("plot: {}", p.display());
-    }
-    if json {
-        let j: Vec<serde_json::Value> = rows
-            .iter()
-            .map(|r| serde_json::json!({"tolerance": r.0, "trace_s_median": r.1, "max_err": r.2, "rms_err": r.3, "hit_miss_differs": r.4}))
-            .collect();
-        println!("{}", serde_json::json!({"scene": scene.display().to_string(), "rows": j}));
-    }
-    Ok(())
-}
-
-fn plot_curve(path: &Path, scene: &Path, rows: &[(f32, f64, f64, f64, usize)]) -> Result<()> {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let floor = 1e-9f64;
-    let ys: Vec<f64> = rows.iter().flat_map(|r| [r.2.max(floor), r.3.max(floor)]).collect();
-    let (ylo, yhi) = (ys.iter().cloned().fold(f64::INFINITY, f64::min) / 2.0, ys.iter().cloned().fold(0.0, f64::max) * 2.0);
-    let (xlo, xhi) = (rows.iter().map(|r| r.1).fold(f64::INFINITY, f64::min) * 0.9, rows.iter().map(|r| r.1).fold(0.0, f64::max) * 1.1);
-    let mut chart = ChartBuilder::on(&root)
-        .caption(format!("{}: trace time vs error of t", scene.file_name().unwrap_or_default().to_string_lossy()), ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(xlo..xhi, (ylo..yhi).log_scale())?;
-    chart.configure_mesh().x_desc("trace time, s (median)").y_desc("error of t / scene size").draw()?;
-    let max_pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.1, r.2.max(floor))).collect();
-    let rms_pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.1, r.3.max(floor))).collect();
-    chart
-        .draw_series(LineSeries::new(max_pts.clone(), &RED))?
-        .label("max")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
-    chart.draw_series(max_pts.iter().map(|p| Circle::new(*p, 3, RED.filled())))?;
-    chart
-        .draw_series(LineSeries::new(rms_pts.clone(), &BLUE))?
-        .label("rms")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
-    chart.draw_series(rows.iter().map(|r| Text::new(format!("{:.0e}", r.0), (r.1, r.2.max(floor)), ("sans-serif", 12))))?;
-    chart.configure_series_labels().background_style(WHITE).border_style(BLACK).draw()?;
-    root.present()?;
     Ok(())
 }

@@ -86,3 +86,48 @@ fn render_every_aov() {
     let out = rothray().arg("render").arg(sampler()).args(["-o", "/tmp/x.png", "--width", "65536", "--height", "65536"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// `bench --knob K --json` for every knob on its README scene: at least 4
+/// rows, the finest setting no worse than the coarsest, and an SVG plot.
+#[test]
+fn bench_knob_json_rows() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let dir = tmpdir("knobs");
+    let cases = [
+        ("sweep", "scenes/sweep.json"),
+        ("gcyl", "scenes/knob_gcyl.json"),
+        ("frame", "scenes/knob_gcyl.json"),
+        ("torus", "benches/scenes/tori.json"),
+        ("winding", "scenes/knob_winding.json"),
+        ("fuse", "scenes/coincident.json"),
+    ];
+    for (knob, scene) in cases {
+        let plot = dir.join(format!("{knob}.svg"));
+        let out = rothray()
+            .arg("bench")
+            .arg(format!("{root}/{scene}"))
+            .args(["--knob", knob, "--width", "96", "--height", "54", "--repeats", "1", "--json", "--plot"])
+            .arg(&plot)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{knob}: {}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8(out.stdout).unwrap();
+        let j: serde_json::Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+        assert_eq!(j["knob"], knob);
+        let rows = j["rows"].as_array().unwrap();
+        assert!(rows.len() >= 4, "{knob}: {text}");
+        let (first, last) = (&rows[0], &rows[rows.len() - 1]);
+        for k in ["max_err", "rms_err", "hit_miss_differs"] {
+            assert!(last[k].as_f64().unwrap() <= first[k].as_f64().unwrap(), "{knob}: {k} finest worse than coarsest: {text}");
+        }
+        assert_eq!(rows.iter().any(|r| r.get("speckles").is_some()), knob == "fuse", "{knob}");
+        assert!(std::fs::read_to_string(&plot).unwrap().starts_with("<svg"), "{knob}: no plot");
+    }
+    let out = rothray().arg("bench").arg(format!("{root}/scenes/sweep.json")).args(["--knob", "nope"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("the knobs are sweep, gcyl, frame, torus, winding, fuse"));
+    let out =
+        rothray().arg("bench").arg(format!("{root}/scenes/sweep.json")).args(["--knob", "frame", "--tolerances", "1.5"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("a whole number from 2 to 65536"));
+}

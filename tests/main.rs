@@ -13,4 +13,5 @@ mod oracle;
 mod povray;
 mod render_flat;
 mod split;
+mod stress;
 mod tiles;

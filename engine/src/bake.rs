@@ -216,11 +216,25 @@ enum Visit {
     Exit(Entity, Op, usize),
 }
 
+/// The generalized cylinder of `d` at the scene's tolerance and knobs: the
+/// `gcyl` knob changes the marching and bisection tolerance only, the frame
+/// samples follow the `frame` knob or else the scene tolerance.
+fn gcyl_data(d: &rothray_primitives::gcyl::GeneralizedCylinder, scene: &RenderScene) -> Result<GenCylData, rothray_primitives::ShapeError> {
+    let tol = scene.tolerance_or_default();
+    let samples = match (scene.knobs.frame, scene.knobs.gcyl) {
+        (Some(n), _) => Some(n as usize),
+        (None, Some(_)) => Some(rothray_primitives::gcyl::frame_samples(tol)),
+        (None, None) => None,
+    };
+    GenCylData::with_frame_samples(d, scene.knobs.gcyl.unwrap_or(tol), samples)
+}
+
 /// System: bakes every object of `world` into `scene` (leaf table in pre-order of
 /// the trees, CSG program, BVHs). Iterative, so any nesting depth works.
 pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeError> {
     let roots = find_objects(world);
-    let mut leaves = LeafTable::default();
+    let mut leaves =
+        LeafTable { torus_tol: scene.knobs.torus.unwrap_or(rothray_primitives::kernels::TORUS_TOLERANCE) as f64, ..LeafTable::default() };
     let mut leaf_info = Vec::new();
     let mut objects = Vec::new();
     // Program nodes reference leaves by index; build leaves first in a pass that
@@ -240,14 +254,18 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
                         let pushed = match desc {
                             LeafDesc::Analytic(shape) => leaves.push(&shape, &global),
                             LeafDesc::Swept(d) => {
-                                let data = SweptSphereData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
+                                let data =
+                                    SweptSphereData::new(&d, scene.knobs.sweep.unwrap_or(scene.tolerance_or_default())).map_err(bad)?;
                                 leaves.push_data(&LeafData::SweptSphere(Arc::new(data)), &global)
                             }
                             LeafDesc::GenCyl(d) => {
-                                let data = GenCylData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
+                                let data = gcyl_data(&d, scene).map_err(bad)?;
                                 leaves.push_data(&LeafData::GenCylinder(Arc::new(data)), &global)
                             }
-                            LeafDesc::Mesh(m) => leaves.push_data(&LeafData::Mesh(m), &global),
+                            LeafDesc::Mesh(m) => {
+                                m.set_far_field(scene.knobs.winding.unwrap_or(rothray_primitives::mesh::BETA));
+                                leaves.push_data(&LeafData::Mesh(m), &global)
+                            }
                         };
                         let idx = pushed.map_err(|err| match err {
                             LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
@@ -293,6 +311,14 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
         });
     }
     let program = replay(&ops, &leaves, &mut objects);
+    // A half-space keeps its offset relative to a point near its object (its
+    // plane's point nearest the object's centre), not near the world origin.
+    for (li, info) in leaf_info.iter().enumerate() {
+        let b = objects[info.object as usize].bounds;
+        if b.is_finite() && !b.is_empty() {
+            leaves.reanchor(li as u32, b.center());
+        }
+    }
     // Objects BVH over the bounded objects.
     let mut boxes = Vec::new();
     let mut ids = Vec::new();
@@ -322,7 +348,10 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
             }
         }
     }
-    let diag = if bounds.is_empty() { 1.0 } else { bounds.diagonal_length().max(1e-3) };
+    // No floor on the size: a floor of 1e-3 made the fusing tolerance 1% of a
+    // scene 1e-6 across (tests/stress.rs, octahedron at scale 1e-6).
+    let diag = if bounds.is_empty() { 1.0 } else { bounds.diagonal_length() };
+    let diag = if diag > 0.0 && diag.is_finite() { diag } else { 1.0 };
     scene.leaves = leaves;
     scene.program = program;
     scene.objects = objects;
@@ -344,7 +373,12 @@ pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeErro
         })
         .collect();
     scene.bounds = bounds;
-    scene.eps = 1e-5 * diag;
+    // The fusing tolerance: 1e-5 of the scene's size, and 2e-6 of a ray origin's
+    // distance from it (f32 rounding of the crossings grows with both); the
+    // `fuse` knob scales both (README: the curve on scenes/coincident.json).
+    let fuse = scene.knobs.fuse.unwrap_or(1e-5);
+    scene.eps = fuse * diag;
+    scene.eps_far = 0.2 * fuse;
     scene.center = if bounds.is_empty() { Vec3::ZERO } else { bounds.center() };
     scene.bake_count += 1;
     Ok(())

@@ -29,6 +29,7 @@
 pub mod bake;
 mod box_list;
 pub mod components;
+pub mod knobs;
 mod packet;
 pub mod part;
 pub mod render;
@@ -40,6 +41,7 @@ pub use bake::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeErro
 pub use components::*;
 pub use glam;
 pub use hecs;
+pub use knobs::{Knob, Knobs};
 pub use packet::{PacketScratch, PACKET_MESHES};
 pub use part::{Part, Split};
 pub use render::{

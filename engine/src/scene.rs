@@ -11,6 +11,7 @@ use rothray_csg::{first_surface, Mode, Program, RayCtx, Scratch};
 use rothray_primitives::{bvh::FlatBvh, Aabb, LeafTable, Span, Surf};
 
 use crate::box_list::entry;
+use crate::knobs::Knobs;
 use crate::tile::TileView;
 
 pub use rothray_primitives::Ray;
@@ -83,6 +84,11 @@ pub struct RenderScene {
     /// Accuracy knob of the swept-sphere and generalized-cylinder solvers, relative
     /// to each shape's size (default 1e-6; see `rothray bench --tolerances`).
     pub tolerance: f32,
+    /// Per-approximation accuracy settings, read by the bake (`None`: defaults).
+    pub knobs: Knobs,
+    /// The fusing tolerance's growth per unit of a ray origin's distance from
+    /// `center` (set by the bake, see [`RenderScene::ray_ctx`]).
+    pub(crate) eps_far: f32,
     pub(crate) fingerprint: u64,
     /// Mesh leaves that nearest-hit queries ask in nearest mode, traced ahead for
     /// whole packets by [`RenderScene::intersect_packet`] (empty when there are
@@ -125,7 +131,7 @@ impl RenderScene {
     #[inline]
     pub(crate) fn eps_at(&self, o: Vec3) -> f32 {
         let far = (o - self.center).length();
-        self.eps + 2e-6 * if far.is_finite() { far } else { 0.0 }
+        self.eps + self.eps_far * if far.is_finite() { far } else { 0.0 }
     }
 
     /// True when every object has finite bounds (no half-space reaches infinity).

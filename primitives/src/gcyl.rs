@@ -344,6 +344,14 @@ impl GSeg {
     }
     /// Unit tangent; where `C' = 0` (coincident control points at an end) the
     /// limit direction from `C''`, else the chord.
+    /// `C(u1) - C(u0)`, accurate to its own size however close `u0` and `u1`
+    /// are (the difference of two evaluations would carry the rounding of the
+    /// points themselves, ~1e-16 of the coefficients, as a chord of any direction).
+    fn chord(&self, u0: f64, u1: f64) -> DVec3 {
+        let (s1, s2) = (u0 + u1, u0 * u0 + u0 * u1 + u1 * u1);
+        let f = |c: &[f64; 4]| (c[1] + c[2] * s1 + c[3] * s2) * (u1 - u0);
+        DVec3::new(f(&self.c[0]), f(&self.c[1]), f(&self.c[2]))
+    }
     fn tangent(&self, u: f64) -> DVec3 {
         let d = self.d1(u);
         let scale = (self.at(1.0) - self.at(0.0)).length_squared().max(1e-300);
@@ -360,25 +368,45 @@ fn eval(c: &[f64], x: f64) -> f64 {
     crate::poly::eval(c, x)
 }
 
-/// One frame sample: point, tangent, x axis, and the extra rotation (radians
-/// about T) from the double-reflected x axis to the next sample's x axis.
+/// One frame sample: segment parameter, tangent, x axis, and the extra rotation
+/// (radians about T) from the double-reflected x axis to the next sample's x axis.
 #[derive(Clone, Copy, Debug)]
 struct FrameSample {
-    c: DVec3,
+    u: f64,
     t: DVec3,
     x: DVec3,
     phi: f64,
 }
 
-/// Double reflection (Wang et al. 2008): carries `x0` from `(c0, t0)` to `(c1, t1)`.
-fn double_reflect(c0: DVec3, t0: DVec3, x0: DVec3, c1: DVec3, t1: DVec3) -> DVec3 {
-    let v1 = c1 - c0;
+/// Double reflection (Wang et al. 2008): carries `x0` at tangent `t0` along the
+/// chord `v1` (from [`GSeg::chord`]) to tangent `t1`. The chord must be exact
+/// to its own size: the first reflection's plane is normal to it, and a chord
+/// of rounding noise (two separately rounded points a zero-length step apart,
+/// as at a joint) turns the frame by up to 180 degrees about the tangent
+/// (issue 15: 0.46 rad after the first joint of a two-segment path). A zero
+/// chord is a zero-length step: the minimal rotation from `t0` to `t1`.
+fn double_reflect(v1: DVec3, t0: DVec3, x0: DVec3, t1: DVec3) -> DVec3 {
     let c1l = v1.length_squared();
-    let (xl, tl) = if c1l > 1e-300 { (x0 - v1 * (2.0 / c1l * v1.dot(x0)), t0 - v1 * (2.0 / c1l * v1.dot(t0))) } else { (x0, t0) };
+    if c1l == 0.0 {
+        return min_rotate(x0, t0, t1);
+    }
+    let (xl, tl) = (x0 - v1 * (2.0 / c1l * v1.dot(x0)), t0 - v1 * (2.0 / c1l * v1.dot(t0)));
     let v2 = t1 - tl;
     let c2 = v2.length_squared();
     let x = if c2 > 1e-300 { xl - v2 * (2.0 / c2 * v2.dot(xl)) } else { xl };
     // re-orthonormalise against rounding
+    (x - t1 * x.dot(t1)).try_normalize().unwrap_or_else(|| t1.any_orthonormal_vector())
+}
+
+/// `x` turned by the smallest rotation that takes the unit `t0` to the unit
+/// `t1` (about `t0 x t1`), made perpendicular to `t1`: the rotation-minimizing
+/// transport across a zero-length step, i.e. a joint of the path (the limit of
+/// a bend of vanishing length; at a tangent-continuous joint it is the identity
+/// up to rounding). Opposite tangents (a cusp) keep `x`.
+fn min_rotate(x: DVec3, t0: DVec3, t1: DVec3) -> DVec3 {
+    let v = t0.cross(t1);
+    let c = t0.dot(t1);
+    let x = if c > -1.0 + 1e-12 { x + v.cross(x) + v.cross(v.cross(x)) / (1.0 + c) } else { x };
     (x - t1 * x.dot(t1)).try_normalize().unwrap_or_else(|| t1.any_orthonormal_vector())
 }
 
@@ -398,6 +426,13 @@ pub struct FrameAt {
     pub x: DVec3,
     /// Profile y axis (`t x x`).
     pub y: DVec3,
+}
+
+/// Frame samples per segment at a tolerance: `clamp(2 tolerance^(-1/4), 8,
+/// 512)` (the frame error is `O(N^-4)`), 64 at the default.
+pub fn frame_samples(tolerance: f32) -> usize {
+    let tol = (tolerance as f64).clamp(1e-12, 1e-2);
+    ((2.0 * tol.powf(-0.25)).ceil() as usize).clamp(8, 512)
 }
 
 /// A baked generalized cylinder. Immutable, `Send + Sync`.
@@ -427,7 +462,17 @@ impl GenCylData {
     /// in distance along the ray) and the minimum marching step
     /// (`sqrt(tolerance) * R`).
     pub fn new(desc: &GeneralizedCylinder, tolerance: f32) -> Result<Self, ShapeError> {
+        Self::with_frame_samples(desc, tolerance, None)
+    }
+
+    /// [`GenCylData::new`] with `samples` frame samples per segment (2 to
+    /// 65536) instead of the tolerance's: the `frame` knob of `rothray bench
+    /// --knob`.
+    pub fn with_frame_samples(desc: &GeneralizedCylinder, tolerance: f32, samples: Option<usize>) -> Result<Self, ShapeError> {
         desc.validate()?;
+        if samples.is_some_and(|n| !(2..=65536).contains(&n)) {
+            return Err(err("frame_samples", format!("must be 2 to 65536, got {}", samples.unwrap_or(0))));
+        }
         if !(tolerance.is_finite() && tolerance > 0.0) {
             return Err(err("tolerance", format!("must be positive, got {tolerance}")));
         }
@@ -473,7 +518,7 @@ impl GenCylData {
             boxes.push(b);
         }
         let size = bounds.diagonal_length() as f64;
-        let nsamp = ((2.0 * tol.powf(-0.25)).ceil() as usize).clamp(8, 512);
+        let nsamp = samples.unwrap_or_else(|| frame_samples(tolerance));
         let frames = build_frames(&segs, nsamp, desc.frame, desc.normal);
         let bvh = (nseg > BVH_MIN_SEGMENTS).then(|| FlatBvh::build(&boxes, 1));
         Ok(GenCylData { segs, boxes, bounds, bvh, prof, rp, nsamp, frames, twist: (desc.twist_deg as f64).to_radians(), tol, size })
@@ -498,7 +543,7 @@ impl GenCylData {
         let fs = &self.frames[i * (n + 1) + k];
         let c = seg.at(u);
         let t = seg.tangent(u);
-        let mut x = double_reflect(fs.c, fs.t, fs.x, c, t);
+        let mut x = double_reflect(seg.chord(fs.u, u), fs.t, fs.x, t);
         if fs.phi != 0.0 {
             x = rotate_about(x, t, lam * fs.phi);
         }
@@ -556,7 +601,22 @@ impl GenCylData {
         };
         (i as u32) << 2 | kind
     }
+}
 
+/// The ray in the terms of segment `i`: `op`, its point nearest the
+/// segment's centre, its unit direction `dn`, and the pencil polynomials
+/// `A = dn . C'` (degree 2) and `B = (C - op) . C'` (degree 5): the ray
+/// crosses the cross-section plane at `u` at distance `B(u) / A(u)` from `op`.
+#[derive(Clone, Copy)]
+struct SegRay {
+    i: usize,
+    op: DVec3,
+    dn: DVec3,
+    a: [f64; 3],
+    b: [f64; 6],
+}
+
+impl GenCylData {
     fn seg_spans(&self, i: usize, od: DVec3, dn: DVec3, dl: f64, out: &mut SmallVec<[(f32, u32, f32, u32); 16]>) {
         let seg = &self.segs[i];
         let tc = (seg.center - od).dot(dn);
@@ -580,7 +640,7 @@ impl GenCylData {
         }
         let cscale = dc.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         if a.iter().all(|x| x.abs() <= 1e-12 * cscale) {
-            self.planar_chords(i, op, dn, tc, dl, &b, out);
+            self.planar_chords(&SegRay { i, op, dn, a, b }, (tc, dl), out);
             return;
         }
         // H = |B n - A w|^2 - R^2 A^2 (deg 10)
@@ -693,7 +753,7 @@ impl GenCylData {
         for &(u0, u1) in &ranges {
             match self.prof {
                 Prof::Circle(_) => runs.push((u0, u1)),
-                Prof::Polygon(..) => self.march(i, op, dn, &a, &b, u0, u1, &mut runs),
+                Prof::Polygon(..) => self.march(&SegRay { i, op, dn, a, b }, (u0, u1), &mut runs),
             }
         }
         for &(u0, u1) in &runs {
@@ -727,24 +787,24 @@ impl GenCylData {
 
     /// Local profile coordinates of the ray's crossing with the plane at u.
     #[inline]
-    fn local_at(&self, i: usize, u: f64, op: DVec3, dn: DVec3, a: &[f64; 3], b: &[f64; 6]) -> (DVec2, FrameAt, f64) {
-        let f = self.frame_at(i, u);
-        let s = eval(b, u) / eval(a, u);
-        let q = op + dn * s - f.c;
+    fn local_at(&self, r: &SegRay, u: f64) -> (DVec2, FrameAt, f64) {
+        let f = self.frame_at(r.i, u);
+        let s = eval(&r.b, u) / eval(&r.a, u);
+        let q = r.op + r.dn * s - f.c;
         (DVec2::new(q.dot(f.x), q.dot(f.y)), f, s)
     }
 
     /// Inside u-runs of a polygon profile within `[u0, u1]` (a range where the
     /// crossing lies within the bounding circle).
-    #[allow(clippy::too_many_arguments)]
-    fn march(&self, i: usize, op: DVec3, dn: DVec3, a: &[f64; 3], b: &[f64; 6], u0: f64, u1: f64, runs: &mut SmallVec<[(f64, f64); 4]>) {
+    fn march(&self, r: &SegRay, (u0, u1): (f64, f64), runs: &mut SmallVec<[(f64, f64); 4]>) {
+        let (i, dn, a, b) = (r.i, r.dn, &r.a, &r.b);
         let seg = &self.segs[i];
         let omega = (self.twist / self.segs.len() as f64).abs()
             + self.frames[i * (self.nsamp + 1)..(i + 1) * (self.nsamp + 1)].iter().fold(0.0f64, |m, f| m.max(f.phi.abs()))
                 * self.nsamp as f64;
         // state: (u, local point, signed distance, speed bound of the local point)
         let state = |u: f64| {
-            let (p, f, s) = self.local_at(i, u, op, dn, a, b);
+            let (p, f, s) = self.local_at(r, u);
             let av = eval(a, u);
             let ap = a[1] + 2.0 * a[2] * u;
             let bp = b[1] + u * (2.0 * b[2] + u * (3.0 * b[3] + u * (4.0 * b[4] + u * 5.0 * b[5])));
@@ -801,17 +861,8 @@ impl GenCylData {
 
     /// The ray lies in the cross-section planes' pencil (`A = 0` on the whole
     /// segment): it meets the copies only where `B = 0`, in the plane itself.
-    #[allow(clippy::too_many_arguments)]
-    fn planar_chords(
-        &self,
-        i: usize,
-        op: DVec3,
-        dn: DVec3,
-        tc: f64,
-        dl: f64,
-        b: &[f64; 6],
-        out: &mut SmallVec<[(f32, u32, f32, u32); 16]>,
-    ) {
+    fn planar_chords(&self, r: &SegRay, (tc, dl): (f64, f64), out: &mut SmallVec<[(f32, u32, f32, u32); 16]>) {
+        let SegRay { i, op, dn, ref b, .. } = *r;
         let mut roots = [0.0; crate::poly::MAX_DEGREE];
         let n = roots_in_tol(b, 0.0, 1.0, 1e-14, &mut roots);
         for &u in &roots[..n] {
@@ -938,9 +989,18 @@ fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> V
     for s in segs {
         for k in 0..=n {
             let u = k as f64 / n as f64;
-            fr.push(FrameSample { c: s.at(u), t: s.tangent(u), x: DVec3::ZERO, phi: 0.0 });
+            fr.push(FrameSample { u, t: s.tangent(u), x: DVec3::ZERO, phi: 0.0 });
         }
     }
+    // The chord between samples g and h (zero across a joint: the repeated sample).
+    let chord = |g: usize, h: usize| {
+        let u = |g: usize| (g % (n + 1)) as f64 / n as f64;
+        if g / (n + 1) == h / (n + 1) {
+            segs[g / (n + 1)].chord(u(g), u(h))
+        } else {
+            DVec3::ZERO
+        }
+    };
     // Frenet normal per sample where the curvature is defined.
     let frenet: Vec<Option<DVec3>> = if kind == Frame::Frenet {
         segs.iter()
@@ -985,11 +1045,11 @@ fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> V
     // carry backwards to the start (a path that starts straight)
     for g in (0..g0).rev() {
         let (a, b) = (fr[g + 1], fr[g]);
-        fr[g].x = double_reflect(a.c, a.t, a.x, b.c, b.t);
+        fr[g].x = double_reflect(chord(g + 1, g), a.t, a.x, b.t);
     }
     for g in g0 + 1..fr.len() {
         let (a, b) = (fr[g - 1], fr[g]);
-        let xd = double_reflect(a.c, a.t, a.x, b.c, b.t);
+        let xd = double_reflect(chord(g - 1, g), a.t, a.x, b.t);
         let x = match frenet[g] {
             Some(nv) => {
                 if nv.dot(xd) < 0.0 {
@@ -1010,7 +1070,7 @@ fn build_frames(segs: &[GSeg], n: usize, kind: Frame, normal: Option<Vec3>) -> V
             continue;
         }
         let (a, b) = (fr[g], fr[g + 1]);
-        let xd = double_reflect(a.c, a.t, a.x, b.c, b.t);
+        let xd = double_reflect(chord(g, g + 1), a.t, a.x, b.t);
         fr[g].phi = xd.cross(b.x).dot(b.t).atan2(xd.dot(b.x));
     }
     fr
@@ -1501,3 +1561,7 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "gcyl_rmf_tests.rs"]
+mod rmf_tests;

@@ -134,6 +134,10 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
 #[inline(always)]
 pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
     let slab = slab01(o.z, d.z)?;
+    // The quadratic in f64 (the f32 inputs are exact there): in f32 its
+    // cancellation near the apex put span ends 1.3e-5 of the view distance off
+    // (tests/stress.rs, cone with an apex, sizes 1e-6 and 1e3).
+    let (o, d, ra, rb) = (o.as_dvec3(), d.as_dvec3(), ra as f64, rb as f64);
     let k = rb - ra;
     let w0 = ra + k * o.z; // radius at the origin's height
     let wd = k * d.z;
@@ -150,7 +154,7 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
                 pieces[0] = Some(full);
             }
         } else {
-            let t = -c / (2.0 * b);
+            let t = (-c / (2.0 * b)) as f32;
             pieces[0] = Some(if b > 0.0 { (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE) } else { (t, sub::SIDE, f32::INFINITY, sub::SIDE) });
         }
     } else {
@@ -165,6 +169,7 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
             if t0 > t1 {
                 std::mem::swap(&mut t0, &mut t1);
             }
+            let (t0, t1) = (t0 as f32, t1 as f32);
             if a > 0.0 {
                 pieces[0] = Some((t0, sub::SIDE, t1, sub::SIDE));
             } else {
@@ -186,7 +191,7 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
                 (false, true) => r.2,
                 _ => 0.0,
             };
-            if w0 + wd * tm < -1e-6 {
+            if w0 + wd * (tm as f64) < -1e-6 {
                 continue;
             }
             out = Some(match out {
@@ -230,7 +235,21 @@ pub fn torus_contains(p: DVec3, rho: f64) -> bool {
 /// come from classifying the midpoints between roots, which stays right for
 /// spindle tori and through tangencies.
 pub fn torus(o: Vec3, d: Vec3, rho: f32, out: &mut [(f32, f32); 3]) -> usize {
-    let rho = rho as f64;
+    torus_tol(o, d, (rho, 0.0), out)
+}
+
+/// The torus polish tolerance a bake uses (the `torus` knob's default): on
+/// `benches/scenes/tori.json` (README, "Run time against error") 1e-6 is the
+/// coarsest setting whose nearest hits equal full f64 polishing's on every
+/// error ray (1e-4 is off by 9e-8 of the scene's size), and it traces those
+/// tori about 20% faster than full polishing.
+pub const TORUS_TOLERANCE: f32 = 1e-6;
+
+/// [`torus`] with the roots polished only to `tol` times the outer radius
+/// `1 + rho` (relative to the torus' size; 0 polishes to full f64 precision, the default):
+/// `shape` is `(rho, tol)`. The `torus` knob of `rothray bench --knob`.
+pub fn torus_tol(o: Vec3, d: Vec3, shape: (f32, f64), out: &mut [(f32, f32); 3]) -> usize {
+    let (rho, tol) = (shape.0 as f64, shape.1);
     let o = o.as_dvec3();
     let dl = d.as_dvec3().length();
     if !(dl > 0.0) {
@@ -259,7 +278,7 @@ pub fn torus(o: Vec3, d: Vec3, rho: f32, out: &mut [(f32, f32); 3]) -> usize {
     // q(s) = (s^2 + e)^2 - 4 (a2 s^2 + 2 a1 s + a0), s = distance from oc.
     let c = [e * e - 4.0 * a0, -8.0 * a1, 2.0 * e - 4.0 * a2, 0.0, 1.0];
     let mut roots = [0.0; poly::MAX_DEGREE];
-    let n = poly::roots_in(&c, -h, h, &mut roots);
+    let n = poly::roots_in_tol(&c, -h, h, tol * rb, &mut roots);
     // Breakpoints: -h, roots..., h; classify each piece by its midpoint.
     let mut pts = [0.0f64; 8];
     pts[0] = -h;

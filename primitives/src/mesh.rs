@@ -140,9 +140,12 @@ struct Dipole {
 }
 
 /// Far-field acceptance: a node is approximated when the query is farther than
-/// `BETA` times the node radius from its centroid. Barill et al. use 2 with a
-/// second-order expansion; with first order only we take 3.
-const BETA: f32 = 3.0;
+/// `BETA` times the node radius from its centroid (the default of
+/// [`MeshData::set_far_field`]). Barill et al. use 2 with a second-order
+/// expansion; with first order only we take 3, where the `winding` knob's curve
+/// (`rothray bench scenes/knobs/winding.json --knob winding`, README) reaches
+/// the exact sum's answers on every error ray.
+pub const BETA: f32 = 3.0;
 /// Triangles per BVH leaf.
 const MAX_LEAF: u32 = 4;
 
@@ -167,6 +170,10 @@ pub struct MeshData {
     wide: wide::Wide,
     /// Per BVH node (Winding rule only).
     dipoles: Vec<Dipole>,
+    /// Far-field acceptance ratio (f32 bits; [`BETA`] unless set by
+    /// [`MeshData::set_far_field`]). Atomic because the mesh is shared
+    /// (`Arc`) by the scenes that use it, and only a bake sets it.
+    beta: std::sync::atomic::AtomicU32,
     rule: InsideRule,
     /// +1, or -1 when an inside-out mesh was flipped.
     orient: f32,
@@ -643,6 +650,7 @@ impl MeshData {
             pairs,
             root,
             dipoles: Vec::new(),
+            beta: std::sync::atomic::AtomicU32::new(BETA.to_bits()),
             rule: eff,
             orient,
             bounds,
@@ -1547,13 +1555,14 @@ impl MeshData {
             return 0.0;
         }
         let mut sum = 0.0f64;
+        let beta = f32::from_bits(self.beta.load(std::sync::atomic::Ordering::Relaxed));
         let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
         stack.push(0);
         while let Some(ni) = stack.pop() {
             let dp = self.dipoles[ni as usize];
             let v = dp.p - p;
             let l2 = v.length_squared();
-            if l2 > BETA * BETA * dp.r2 {
+            if l2 > beta * beta * dp.r2 {
                 let l = l2.sqrt();
                 sum += (dp.n.dot(v) / (l2 * l)) as f64;
                 continue;
@@ -1570,6 +1579,14 @@ impl MeshData {
             }
         }
         (sum / (4.0 * std::f64::consts::PI)) as f32 * self.orient
+    }
+
+    /// Sets the far-field acceptance ratio of [`MeshData::winding_number`]: a BVH
+    /// node is replaced by its dipole when the query point is farther than
+    /// `beta` node radii from it (default [`BETA`]; infinity sums every
+    /// triangle). The accuracy knob `winding` of `rothray bench --knob`.
+    pub fn set_far_field(&self, beta: f32) {
+        self.beta.store(beta.to_bits(), std::sync::atomic::Ordering::Relaxed);
     }
 
     /// Exact generalized winding number (sum over every triangle; slow oracle).

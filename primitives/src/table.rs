@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec4};
+use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3, Vec3A, Vec4};
 
 use crate::{
     aabb::Aabb,
@@ -361,8 +361,17 @@ pub enum LeafError {
 pub struct LeafTable {
     /// Kind tag per leaf.
     pub kind: Vec<LeafKind>,
-    /// World-to-local affine map per leaf (rays are mapped, not normalised).
+    /// World-to-local affine map per leaf, applied to points *relative to the
+    /// leaf's anchor* (`to_local[i].transform_point3(p - anchor[i])`; rays'
+    /// directions are mapped, not normalised).
     pub to_local: Vec<Affine3A>,
+    /// A world point near each leaf (f32). Points are taken relative to it
+    /// before the linear map: the difference of nearby f32 values is exact, and
+    /// the map's translation stays small. With the translation of the whole
+    /// map instead, a unit cylinder 1e5 from the origin lost 3e-3 of the view
+    /// distance to cancellation (tests/stress.rs).
+    /// (`Vec3A`: the subtraction is one SIMD operation on the hot path.)
+    pub anchor: Vec<Vec3A>,
     /// Kind-specific parameters.
     pub p0: Vec<Vec4>,
     /// Kind-specific parameters.
@@ -377,6 +386,9 @@ pub struct LeafTable {
     pub gcyls: Vec<Arc<GenCylData>>,
     /// Distinct meshes (a mesh under many transforms is stored once).
     pub meshes: Vec<Arc<MeshData>>,
+    /// Polish tolerance of the torus roots (see [`kernels::torus_tol`]; 0, the
+    /// default, is full f64 precision).
+    pub torus_tol: f64,
 }
 
 impl LeafTable {
@@ -392,6 +404,7 @@ impl LeafTable {
     pub fn clear(&mut self) {
         self.kind.clear();
         self.to_local.clear();
+        self.anchor.clear();
         self.p0.clear();
         self.p1.clear();
         self.bounds.clear();
@@ -401,22 +414,35 @@ impl LeafTable {
         self.meshes.clear();
     }
 
-    fn inverse32(m: &DAffine3) -> Result<Affine3A, LeafError> {
+    /// The f32 world-to-local map of `world_from_local` relative to `anchor`
+    /// (see [`LeafTable::anchor`]), and the local point of the anchor in f64
+    /// (its translation before rounding).
+    fn inverse32(m: &DAffine3, anchor: Vec3) -> Result<(Affine3A, DVec3), LeafError> {
         let det = m.matrix3.determinant();
         if !det.is_finite() || det.abs() <= 1e-300 || !m.translation.is_finite() {
             return Err(LeafError::SingularTransform);
         }
         let inv = m.inverse();
-        let inv32 = Affine3A::from_mat3_translation(inv.matrix3.as_mat3(), inv.translation.as_vec3());
+        let b = inv.transform_point3(anchor.as_dvec3());
+        let inv32 = Affine3A::from_mat3_translation(inv.matrix3.as_mat3(), b.as_vec3());
         if !(inv32.matrix3.is_finite() && inv32.translation.is_finite()) {
             return Err(LeafError::SingularTransform);
         }
-        Ok(inv32)
+        Ok((inv32, b))
+    }
+
+    /// The local point of world point `p` in leaf `i`'s frame.
+    #[inline(always)]
+    fn local_point(&self, i: usize, p: Vec3) -> Vec3 {
+        self.to_local[i].transform_point3a(Vec3A::from(p) - self.anchor[i]).into()
     }
 
     /// Adds a leaf with shared data, placed by `world_from_node`; returns its index.
     pub fn push_data(&mut self, data: &LeafData, world_from_node: &DAffine3) -> Result<u32, LeafError> {
-        let inv32 = Self::inverse32(world_from_node)?;
+        // Swept spheres, generalized cylinders and meshes keep their own
+        // coordinates (their local bounds can lie anywhere): anchor at the node's origin.
+        let anchor = world_from_node.translation.as_vec3();
+        let (inv32, _) = Self::inverse32(world_from_node, anchor)?;
         let m32 = Affine3A::from_mat3_translation(world_from_node.matrix3.as_mat3(), world_from_node.translation.as_vec3());
         let (kind, ext, local) = match data {
             LeafData::SweptSphere(d) => {
@@ -441,6 +467,7 @@ impl LeafTable {
         let i = self.kind.len() as u32;
         self.kind.push(kind);
         self.to_local.push(inv32);
+        self.anchor.push(anchor.into());
         self.p0.push(Vec4::ZERO);
         self.p1.push(Vec4::ZERO);
         self.bounds.push(local.transformed(&m32));
@@ -453,13 +480,48 @@ impl LeafTable {
         shape.validate().map_err(LeafError::Shape)?;
         let c = shape.canonical();
         let m = *world_from_node * c.node_from_local;
-        let inv32 = Self::inverse32(&m)?;
         let bounds = canonical_bounds(&c, &m);
+        // The anchor: a point of the solid (the centre of a sphere or torus, the
+        // axis midpoint of a cylinder or cone, a box's centre), or the plane's
+        // point nearest the node's origin (re-anchored near its object by
+        // `reanchor` once the object's bounds are known).
+        let local_anchor = match c.kind {
+            LeafKind::Cylinder | LeafKind::Cone => DVec3::new(0.0, 0.0, 0.5),
+            LeafKind::Cuboid => (c.p0.truncate().as_dvec3() + c.p1.truncate().as_dvec3()) * 0.5,
+            LeafKind::HalfSpace => c.p0.truncate().as_dvec3() * c.p0.w as f64,
+            _ => DVec3::ZERO,
+        };
+        let anchor = m.transform_point3(local_anchor).as_vec3();
+        let (inv32, b) = Self::inverse32(&m, anchor)?;
+        // Boxes and planes take the anchor's local point into their own
+        // parameters, in f64 (a box 1e5 from the origin keeps bounds relative to
+        // its centre, a plane its offset relative to the anchor); the map is
+        // then linear.
+        let (inv32, p0, p1) = match c.kind {
+            LeafKind::Cuboid => {
+                let lo = c.p0.truncate().as_dvec3() - b;
+                let hi = c.p1.truncate().as_dvec3() - b;
+                let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
+                (z, lo.as_vec3().extend(0.0), hi.as_vec3().extend(0.0))
+            }
+            LeafKind::HalfSpace => {
+                // From the description's f32 numbers in f64: the canonical
+                // offset / |normal| rounded in f32 had already lost 3e-3 of a
+                // plane 1e5 from the origin.
+                let LeafShape::HalfSpace(h) = shape else { unreachable!() };
+                let n = h.normal.as_dvec3();
+                let w = (h.offset as f64 - n.dot(b)) / n.length();
+                let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
+                (z, c.p0.truncate().extend(w as f32), c.p1)
+            }
+            _ => (inv32, c.p0, c.p1),
+        };
         let i = self.kind.len() as u32;
         self.kind.push(c.kind);
         self.to_local.push(inv32);
-        self.p0.push(c.p0);
-        self.p1.push(c.p1);
+        self.anchor.push(anchor.into());
+        self.p0.push(p0);
+        self.p1.push(p1);
         self.bounds.push(bounds);
         self.ext.push(0);
         Ok(i)
@@ -472,7 +534,7 @@ impl LeafTable {
         let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         let iu = i as usize;
         let m = &self.to_local[iu];
-        let lo = m.transform_point3(o);
+        let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
         let ld = m.transform_vector3(d);
         let r = match self.kind[iu] {
             LeafKind::Sphere => kernels::sphere(lo, ld),
@@ -482,7 +544,7 @@ impl LeafTable {
             LeafKind::HalfSpace => kernels::half_space(lo, ld, self.p0[iu].truncate(), self.p0[iu].w),
             LeafKind::Torus => {
                 let mut buf = [(0.0f32, 0.0f32); 3];
-                let n = kernels::torus(lo, ld, self.p0[iu].x, &mut buf);
+                let n = kernels::torus_tol(lo, ld, (self.p0[iu].x, self.torus_tol), &mut buf);
                 for &(a, b) in &buf[..n] {
                     push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, tmin, tmax);
                 }
@@ -527,7 +589,8 @@ impl LeafTable {
         let iu = i as usize;
         let m = &self.to_local[iu];
         let mesh = &self.meshes[self.ext[iu] as usize];
-        let local = Ray::segment(m.transform_point3(ray.origin), m.transform_vector3(ray.dir), ray.tmin, ray.tmax);
+        let lo: Vec3 = m.transform_point3a(Vec3A::from(ray.origin) - self.anchor[iu]).into();
+        let local = Ray::segment(lo, m.transform_vector3(ray.dir), ray.tmin, ray.tmax);
         mesh.spans_nearest(&local, slack, i, out)
     }
 
@@ -540,9 +603,12 @@ impl LeafTable {
         let m = &self.to_local[iu];
         let a = glam::DMat3::from_cols(m.matrix3.x_axis.as_dvec3(), m.matrix3.y_axis.as_dvec3(), m.matrix3.z_axis.as_dvec3());
         let b = m.translation.as_dvec3();
-        // Local plane dot(nl, x) <= w with x = A p + b: dot(A^T nl, p) <= w - dot(nl, b).
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
+        // Local plane dot(nl, x) <= w with x = A (p - c) + b:
+        // dot(A^T nl, p) <= w - dot(nl, b) + dot(A^T nl, c).
         let mut push = |nl: DVec3, w: f64| {
-            if let Some(p) = Plane::new(a.transpose() * nl, w - nl.dot(b)) {
+            let n = a.transpose() * nl;
+            if let Some(p) = Plane::new(n, w - nl.dot(b) + n.dot(c)) {
                 out.push(p);
             }
         };
@@ -566,6 +632,34 @@ impl LeafTable {
         }
     }
 
+    /// Moves the anchor of half-space leaf `i` to the point of its plane
+    /// nearest `near` (the centre of its object's bounds, at bake): the
+    /// plane's offset is kept relative to a point near where it matters,
+    /// computed in f64 from the stored map. Other kinds keep their anchor.
+    pub fn reanchor(&mut self, i: u32, near: Vec3) {
+        let iu = i as usize;
+        if self.kind[iu] != LeafKind::HalfSpace || !near.is_finite() {
+            return;
+        }
+        let m = &self.to_local[iu];
+        let a = glam::DMat3::from_cols(m.matrix3.x_axis.as_dvec3(), m.matrix3.y_axis.as_dvec3(), m.matrix3.z_axis.as_dvec3());
+        let (nl, w) = (self.p0[iu].truncate().as_dvec3(), self.p0[iu].w as f64);
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
+        // World plane: dot(n, p - c) <= w with n = A^T nl.
+        let n = a.transpose() * nl;
+        let nn = n.length_squared();
+        if !(nn > 0.0 && nn.is_finite()) {
+            return;
+        }
+        let q = near.as_dvec3();
+        let c2 = (q - n * ((n.dot(q - c) - w) / nn)).as_vec3();
+        if !c2.is_finite() {
+            return;
+        }
+        self.p0[iu].w = (w - n.dot(c2.as_dvec3() - c)) as f32;
+        self.anchor[iu] = c2.into();
+    }
+
     /// Is leaf `i` a triangle mesh?
     pub fn is_mesh(&self, i: u32) -> bool {
         self.kind[i as usize] == LeafKind::Mesh
@@ -583,14 +677,14 @@ impl LeafTable {
         }
         let m = &self.to_local[iu];
         let dl: [Vec3; 8] = std::array::from_fn(|k| m.transform_vector3(q.d[k]));
-        let local = NearestRays8 { o: m.transform_point3(q.o), d: &dl, ..*q };
+        let local = NearestRays8 { o: m.transform_point3a(Vec3A::from(q.o) - self.anchor[iu]).into(), d: &dl, ..*q };
         self.meshes[self.ext[iu] as usize].spans_nearest8(&local, active, i, out)
     }
 
     /// Is the world point inside leaf `i` (boundary included)?
     pub fn contains(&self, i: u32, p: Vec3) -> bool {
         let iu = i as usize;
-        let l = self.to_local[iu].transform_point3(p);
+        let l = self.local_point(iu, p);
         let p0 = self.p0[iu];
         match self.kind[iu] {
             LeafKind::Sphere => l.length_squared() <= 1.0,
@@ -621,7 +715,7 @@ impl LeafTable {
             let nl = self.meshes[self.ext[iu] as usize].normal(sub, Vec3::ZERO);
             return (m.matrix3.transpose() * glam::Vec3A::from(nl)).normalize_or(glam::Vec3A::Y).into();
         }
-        let l = m.transform_point3(o) + m.transform_vector3(d) * t;
+        let l = self.local_point(iu, o) + m.transform_vector3(d) * t;
         let nl = match self.kind[iu] {
             LeafKind::Sphere => l,
             LeafKind::Cuboid => {
