@@ -362,3 +362,66 @@ fn mesh_assimp_testmodels_do_not_panic() {
     );
     assert!(panicked.is_empty(), "panicked on {panicked:?}");
 }
+
+/// A comb face of `teeth` teeth (heights from `seed`), on integer coordinates:
+/// 3 teeth + 2 vertices, counter-clockwise. Returns the OBJ `v` lines, the
+/// face's index list, and its shoelace area.
+fn comb_obj(teeth: usize, seed: u64) -> (String, Vec<usize>, f64) {
+    let mut p: Vec<[i64; 2]> = vec![[2 * teeth as i64, 0]];
+    let mut h = seed;
+    for t in (0..teeth as i64).rev() {
+        h = h.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let y = 2 + (h >> 61) as i64;
+        p.push([2 * t + 2, y]);
+        p.push([2 * t + 1, y]);
+        p.push(if t > 0 { [2 * t + 1, 1] } else { [0, y] });
+    }
+    p.push([0, 0]);
+    let area = (0..p.len()).map(|i| (p[i][0] * p[(i + 1) % p.len()][1] - p[i][1] * p[(i + 1) % p.len()][0]) as f64).sum::<f64>() * 0.5;
+    let v: String = p.iter().map(|q| format!("v {} {} 0\n", q[0], q[1])).collect();
+    (v, (1..=p.len()).collect(), area)
+}
+
+/// A 1 000 001-index comb face through the OBJ loader: n - 2 triangles, none
+/// turned over, of the face's shoelace area, and no warning (the sweep took it;
+/// the old loader halved it across the gaps, with a warning). A smaller comb
+/// prism is a closed solid of the right volume.
+#[test]
+fn mesh_obj_million_index_comb_face() {
+    let seed = 0x5eed_0017;
+    println!("seed {seed:#x}");
+    let d = scratch("comb");
+    let (v, face, area) = comb_obj(333_333, seed);
+    let f: String = face.iter().map(|k| format!(" {k}")).collect();
+    let p = write(&d, "comb.obj", format!("{v}f{f}\n"));
+    let (pos, tris, warnings) = load_mesh(&p).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(tris.len(), face.len() - 2);
+    let area2 = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|k| pos[k as usize].as_dvec3());
+        (b - a).cross(c - a).z
+    };
+    assert!(tris.iter().all(|t| area2(t) >= 0.0), "a triangle is turned over");
+    assert_eq!(tris.iter().map(area2).sum::<f64>() * 0.5, area, "integer coordinates: exact");
+
+    let (v, face, area) = comb_obj(3_000, seed);
+    let n = face.len();
+    let mut s = v.clone();
+    s.extend(v.lines().map(|l| format!("{}1\n", l.strip_suffix('0').unwrap())));
+    s.push('f');
+    s.extend(face.iter().rev().map(|k| format!(" {k}")));
+    s.push_str("\nf");
+    s.extend(face.iter().map(|k| format!(" {}", k + n)));
+    s.push('\n');
+    for i in 1..=n {
+        let j = i % n + 1;
+        s.push_str(&format!("f {i} {j} {} {}\n", j + n, i + n));
+    }
+    let p = write(&d, "prism.obj", s);
+    let (pos, tris, warnings) = load_mesh(&p).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let r = MeshData::new(pos, tris, InsideRule::Orientation).unwrap().report();
+    assert!(r.closed && r.consistently_oriented && r.usable_as_solid, "{r:?}");
+    assert_eq!(r.self_intersections, Some(0));
+    assert!((r.volume - area).abs() < 1e-9 * area, "volume {} vs {area}", r.volume);
+}
