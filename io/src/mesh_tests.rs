@@ -311,28 +311,10 @@ fn mesh_bunny_report() {
 /// MeshData::new without a panic (errors are fine).
 #[test]
 fn mesh_assimp_testmodels_do_not_panic() {
-    let roots = ["/usr/share/assimp/models", "/usr/share/assimp-testmodels"];
-    let Some(root) = roots.iter().map(Path::new).find(|p| p.is_dir()) else {
+    let Some((root, files)) = crate::assimp_corpus::assimp_mesh_files() else {
         println!("SKIPPED: assimp-testmodels not installed (apt-get install assimp-testmodels)");
         return;
     };
-    let mut files = vec![];
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&dir) else { continue };
-        for e in rd.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if matches!(
-                p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref(),
-                Some("obj" | "gltf" | "glb")
-            ) {
-                files.push(p);
-            }
-        }
-    }
-    files.sort();
     let (mut loaded, mut solid, mut failed, mut panicked) = (0, 0, 0, vec![]);
     for f in &files {
         let r = std::panic::catch_unwind(|| match load_mesh(f) {
