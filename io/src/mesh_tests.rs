@@ -407,3 +407,20 @@ fn mesh_obj_million_index_comb_face() {
     assert_eq!(r.self_intersections, Some(0));
     assert!((r.volume - area).abs() < 1e-9 * area, "volume {} vs {area}", r.volume);
 }
+
+/// A face that crosses itself (a bow tie) and one that touches itself (a
+/// pinch) are halved, warned with their lines; a face of 1 or 2 vertices is
+/// skipped, warned with its line.
+#[test]
+fn mesh_obj_faces_that_are_not_simple_or_too_short_are_warned_with_their_line() {
+    let d = scratch("notsimple");
+    let text = "v 0 0 0\nv 1 1 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 2 2 0\nv 0.5 0.5 0\n\
+f 1 2 3 4\nf 1 3 5 6 7 2 4\nf 1 3\nf 1 2 3\n";
+    let p = write(&d, "bad.obj", text);
+    let (_, tris, warnings) = load_mesh(&p).unwrap();
+    assert_eq!(tris.len(), 2 + 5 + 1, "every face of 3 or more vertices gives n - 2 triangles");
+    let w = warnings.join("\n");
+    assert!(w.contains("line 8 (4 vertices), line 9 (7 vertices)"), "{w}");
+    assert!(w.contains("not simple"), "{w}");
+    assert!(w.contains("line 10") && w.contains("fewer than 3 vertices"), "{w}");
+}

@@ -272,5 +272,10 @@ fn a_million_vertex_comb_is_swept() {
     let mut rng = Rng(seed);
     let p = comb(&mut rng, 333_333, 0.3);
     assert!(p.len() >= 1_000_000);
+    // Printed, not asserted: the figure the module's doc quotes.
+    let (pos, idx) = (to3(&p), (0..p.len() as u32).collect::<Vec<_>>());
+    let t0 = std::time::Instant::now();
+    triangulate(&pos, &idx, &mut Vec::new());
+    println!("{} vertices triangulated in {:.2} s", p.len(), t0.elapsed().as_secs_f64());
     assert_eq!(check(&p, "million comb", &mut rng), Method::Swept);
 }
