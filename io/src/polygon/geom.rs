@@ -2,11 +2,17 @@
 //! point against an edge, and the order of edges on the sweep line.
 //!
 //! The face's 2-D coordinates are f32 values (an OBJ vertex's, one axis
-//! dropped, one maybe negated), so in f64 their differences are exact and
-//! each product of two differences fits in 53 bits: `orient`'s sign is exact,
-//! not a rounding guess. The sweeps' decisions are therefore consistent, which
-//! is what keeps the status tree ordered (a comparator that disagrees with
-//! itself would corrupt it).
+//! dropped, one maybe negated), and `orient` works in f64; products of f32
+//! differences cannot overflow or underflow it. Where the coordinates are
+//! integers below 2^24 times one power of two (grids, the comb tests), the
+//! differences are exact and each product of two fits in 53 bits, so the sign
+//! is exact and the sweeps' decisions are consistent, which is what keeps the
+//! status tree ordered. Other faces get f64's ~1e-16 relative accuracy: only a
+//! nearly collinear triple can be judged the wrong way (an adaptive exact
+//! predicate, as Shewchuk's, would close this). Then the checks after the
+//! sweep (n - 2 triangles, none turned over) send the face to halving with a
+//! warning, and a misordered `BTreeMap` gives wrong answers, not undefined
+//! behaviour.
 
 use std::cmp::Ordering;
 

@@ -21,6 +21,13 @@
 //! 1.2 s; `rothray check` of it, parsing included, takes 1.6 to 2.7 s of CPU and
 //! 161 MB. The ear clipping this replaced was quadratic (a 30 000-vertex face
 //! took 21 s), so faces over 512 vertices were halved across their notches.
+//!
+//! Not every face has a triangulation without slivers: the comb's bar, with
+//! 333 333 vertices in line along its top and two corners below, can only be
+//! fanned from those two corners, and every ray that meets the bar then walks
+//! all of those boxes (a 320x240 render of the comb prism ran past 12 minutes,
+//! where the 1 000 000-index spiral prism renders in 20 s). Steiner points
+//! inside the face would fix that; the loader adds none.
 
 mod geom;
 mod monotone;

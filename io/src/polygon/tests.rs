@@ -279,3 +279,21 @@ fn a_million_vertex_comb_is_swept() {
     println!("{} vertices triangulated in {:.2} s", p.len(), t0.elapsed().as_secs_f64());
     assert_eq!(check(&p, "million comb", &mut rng), Method::Swept);
 }
+
+/// Coordinates near f32's largest and smallest (the products of their
+/// differences stay within f64's range, so `orient` keeps its exact sign): the
+/// same comb scaled by powers of two gives the same triangles.
+#[test]
+fn extreme_coordinates_give_the_same_triangles() {
+    let mut rng = Rng(0x5eed_0019);
+    let p = comb(&mut rng, 50, 0.0);
+    let idx: Vec<u32> = (0..p.len() as u32).collect();
+    let mut want = Vec::new();
+    assert_eq!(triangulate(&to3(&p), &idx, &mut want), Method::Swept);
+    for s in [2f64.powi(120), 2f64.powi(-120)] {
+        let q: Vec<DVec2> = p.iter().map(|v| *v * s).collect();
+        let mut t = Vec::new();
+        assert_eq!(triangulate(&to3(&q), &idx, &mut t), Method::Swept, "scale {s}");
+        assert_eq!(t, want, "scale {s}");
+    }
+}
