@@ -297,3 +297,90 @@ fn extreme_coordinates_give_the_same_triangles() {
         assert_eq!(t, want, "scale {s}");
     }
 }
+
+/// Random rings on a 5x5 grid (many repeated points, vertices in line, edges
+/// along each other, crossings): never a panic, always n - 2 triangles, and
+/// whenever the sweep accepts a ring (it found it simple, up to repeats), the
+/// oracle holds.
+#[test]
+fn degenerate_grid_rings_never_panic_and_swept_ones_are_right() {
+    let seed = 0x5eed_001a;
+    println!("seed {seed:#x}");
+    let mut rng = Rng(seed);
+    let mut swept = 0;
+    for case in 0..20_000 {
+        let n = 3 + rng.range(9);
+        let p: Vec<DVec2> = (0..n).map(|_| DVec2::new(rng.range(5) as f64, rng.range(5) as f64)).collect();
+        let pos = to3(&p);
+        let idx: Vec<u32> = (0..n as u32).collect();
+        let mut t = Vec::new();
+        let m = triangulate(&pos, &idx, &mut t);
+        assert_eq!(t.len(), n - 2, "case {case} (seed {seed:#x}): {p:?}");
+        if m == Method::Swept {
+            swept += 1;
+            // In the face's own orientation (a clockwise ring gives clockwise
+            // triangles).
+            let sign = shoelace(&p).signum();
+            let area2 = |t: &[u32; 3]| sign * geom::orient(p[t[0] as usize], p[t[1] as usize], p[t[2] as usize]);
+            assert!(t.iter().all(|t| area2(t) >= 0.0), "case {case}: {p:?} -> {t:?}");
+            let got: f64 = t.iter().map(area2).sum::<f64>() * 0.5;
+            assert_eq!(got, shoelace(&p).abs(), "case {case}: {p:?} -> {t:?}");
+        }
+    }
+    println!("{swept} of 20 000 random rings swept");
+    assert!(swept > 1000);
+    // The simplicity test against all pairs of edges, on rings of distinct
+    // grid points: a simple non-convex ring is swept (and passes the full
+    // oracle, counter-clockwise), any other is forced.
+    let (mut simple, mut forced) = (0, 0);
+    for case in 0..40_000 {
+        let mut p: Vec<DVec2> = (0..4 + rng.range(8)).map(|_| DVec2::new(rng.range(6) as f64, rng.range(6) as f64)).collect();
+        if (0..p.len()).any(|i| (0..i).any(|j| p[i] == p[j])) {
+            continue;
+        }
+        if shoelace(&p) < 0.0 {
+            p.reverse();
+        }
+        let idx: Vec<u32> = (0..p.len() as u32).collect();
+        let m = triangulate(&to3(&p), &idx, &mut Vec::new());
+        let what = format!("grid ring {case} (seed {seed:#x}): {p:?}");
+        match (m, brute_simple(&p)) {
+            (Method::Convex, _) => {}
+            (_, true) => {
+                assert_eq!(check(&p, &what, &mut rng), Method::Swept, "{what}");
+                simple += 1;
+            }
+            (m, false) => {
+                assert_eq!(m, Method::Forced, "{what}");
+                forced += 1;
+            }
+        }
+    }
+    println!("{simple} simple grid rings swept, {forced} others forced");
+    assert!(simple > 1500 && forced > 1500);
+}
+
+/// All pairs of edges: consecutive ones may only share their vertex (not
+/// fold back along each other), others may not touch.
+fn brute_simple(p: &[DVec2]) -> bool {
+    let n = p.len();
+    let on = |a: DVec2, b: DVec2, q: DVec2| geom::orient(a, b, q) == 0.0 && q.cmpge(a.min(b)).all() && q.cmple(a.max(b)).all();
+    for i in 0..n {
+        for j in i + 1..n {
+            let (a, b, c, d) = (p[i], p[(i + 1) % n], p[j], p[(j + 1) % n]);
+            if j == i + 1 || (i == 0 && j == n - 1) {
+                // Shared vertex s, far ends x and y.
+                let (s, x, y) = if j == i + 1 { (b, a, d) } else { (a, b, c) };
+                if on(s, x, y) || on(s, y, x) {
+                    return false;
+                }
+                continue;
+            }
+            let (o1, o2, o3, o4) = (geom::orient(a, b, c), geom::orient(a, b, d), geom::orient(c, d, a), geom::orient(c, d, b));
+            if (o1 * o2 < 0.0 && o3 * o4 < 0.0) || on(a, b, c) || on(a, b, d) || on(c, d, a) || on(c, d, b) {
+                return false;
+            }
+        }
+    }
+    true
+}
