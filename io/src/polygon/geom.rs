@@ -2,25 +2,63 @@
 //! point against an edge, and the order of edges on the sweep line.
 //!
 //! The face's 2-D coordinates are f32 values (an OBJ vertex's, one axis
-//! dropped, one maybe negated), and `orient` works in f64; products of f32
-//! differences cannot overflow or underflow it. Where the coordinates are
-//! integers below 2^24 times one power of two (grids, the comb tests), the
-//! differences are exact and each product of two fits in 53 bits, so the sign
-//! is exact and the sweeps' decisions are consistent, which is what keeps the
-//! status tree ordered. Other faces get f64's ~1e-16 relative accuracy: only a
-//! nearly collinear triple can be judged the wrong way (an adaptive exact
-//! predicate, as Shewchuk's, would close this). Then the checks after the
-//! sweep (n - 2 triangles, none turned over) send the face to halving with a
-//! warning, and a misordered `BTreeMap` gives wrong answers, not undefined
-//! behaviour.
+//! dropped, one maybe negated), so the product of two of them is exact in f64
+//! and cannot overflow or underflow it. `orient` takes the plain f64 formula
+//! when Shewchuk's error bound proves its sign, and otherwise sums the six
+//! exact products of its expansion exactly: the sign is always exact. That is
+//! what keeps the sweeps' decisions consistent, and so the status tree
+//! ordered, on nearly collinear vertices.
 
 use std::cmp::Ordering;
 
 use glam::DVec2;
 
-/// Twice the signed area of `(a, b, c)`: positive when `c` is left of `a -> b`.
+/// Twice the signed area of `(a, b, c)` (positive when `c` is left of
+/// `a -> b`), with the exact sign for f32-valued coordinates; the magnitude is
+/// f64's.
 pub fn orient(a: DVec2, b: DVec2, c: DVec2) -> f64 {
-    (b - a).perp_dot(c - a)
+    let l = (b.x - a.x) * (c.y - a.y);
+    let r = (b.y - a.y) * (c.x - a.x);
+    let det = l - r;
+    // Shewchuk's ccwerrboundA: beyond it the rounded sign is the true one.
+    let bound = 3.330_669_073_875_471_6e-16 * (l.abs() + r.abs());
+    if det > bound || -det > bound {
+        return det;
+    }
+    exact_orient(a, b, c)
+}
+
+/// The sign of `orient` (as -1, 0 or 1) from its expansion
+/// `bx cy - bx ay - ax cy - by cx + by ax + ay cx` (the `ax ay` terms cancel):
+/// six products of f32 values, each exact in f64, summed without rounding
+/// into a nonoverlapping expansion (Shewchuk's grow-expansion), whose largest
+/// nonzero component has the sum's sign.
+fn exact_orient(a: DVec2, b: DVec2, c: DVec2) -> f64 {
+    let terms = [b.x * c.y, -(b.x * a.y), -(a.x * c.y), -(b.y * c.x), b.y * a.x, a.y * c.x];
+    let mut e = [0.0f64; 6];
+    let mut len = 0;
+    for t in terms {
+        let mut q = t;
+        let mut k = 0;
+        for i in 0..len {
+            let (s, h) = two_sum(q, e[i]);
+            if h != 0.0 {
+                e[k] = h;
+                k += 1;
+            }
+            q = s;
+        }
+        e[k] = q;
+        len = k + 1;
+    }
+    e[..len].iter().rev().find(|&&x| x != 0.0).map_or(0.0, |x| x.signum())
+}
+
+/// `a + b` as the rounded sum and its exact error (Knuth).
+fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    let bb = s - a;
+    (s, (a - (s - bb)) + (b - bb))
 }
 
 /// Does `a` come after `b` in the sweep (top to bottom; on a tie in y, left to

@@ -99,17 +99,17 @@ pub fn for_each_piece(
 /// Sorts the diagonal slots `s + 1 .. e - 1` of vertex `v` counter-clockwise
 /// from the direction to the next vertex, carrying their twins' links along.
 fn sort_around(p: &[DVec2], v: usize, ring: &mut [u32], twin: &mut [u32], s: usize, e: usize) {
-    let o = p[v];
-    let r = p[ring[s] as usize] - o;
-    // Half-turns from `r`: 0 for [0, pi), 1 for [pi, 2 pi); then by cross sign.
-    let half = |d: DVec2| -> u8 {
-        let c = r.perp_dot(d);
-        u8::from(!(c > 0.0 || (c == 0.0 && r.dot(d) > 0.0)))
+    let (o, nx) = (p[v], p[ring[s] as usize]);
+    // Half-turns from the direction to the next vertex: 0 for [0, pi), 1 for
+    // [pi, 2 pi); then by the exact sign of the turn between the two.
+    let half = |w: u32| -> u8 {
+        let q = p[w as usize];
+        let c = orient(o, nx, q);
+        u8::from(!(c > 0.0 || (c == 0.0 && (nx - o).dot(q - o) > 0.0)))
     };
     let mut items: Vec<(u32, u32)> = (s + 1..e - 1).map(|k| (ring[k], twin[k])).collect();
     items.sort_by(|&(a, _), &(b, _)| {
-        let (da, db) = (p[a as usize] - o, p[b as usize] - o);
-        half(da).cmp(&half(db)).then_with(|| {
+        half(a).cmp(&half(b)).then_with(|| {
             let c = orient(o, p[a as usize], p[b as usize]);
             if c > 0.0 {
                 std::cmp::Ordering::Less

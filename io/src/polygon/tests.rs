@@ -384,3 +384,57 @@ fn brute_simple(p: &[DVec2]) -> bool {
     }
     true
 }
+
+/// `orient`'s sign against exact integer arithmetic, on nearly collinear
+/// triples of f32 values spread over 2^-10 .. 2^26 (as integers in units of
+/// 2^-34 their products fit i128): the third point is the f32 rounding of a
+/// point a sixteenth-multiple of the way from the first to the second, often
+/// exactly on the line. (The plain f64 formula also gets all of these right,
+/// as printed: the exact stage covers wider spreads than i128 can check.)
+#[test]
+fn orient_has_the_exact_sign() {
+    let seed = 0x5eed_001b;
+    println!("seed {seed:#x}");
+    let mut rng = Rng(seed);
+    let f = |rng: &mut Rng| -> f32 {
+        let m = (rng.next() >> 40) as f32; // 24 bits
+        let e = rng.range(13) as i32 - 10;
+        let v = m * 2f32.powi(e);
+        if rng.range(2) == 0 {
+            -v
+        } else {
+            v
+        }
+    };
+    // None where a coordinate is not a whole number of units (a point rounded
+    // near zero).
+    let exact = |p: [[f32; 2]; 3]| -> Option<i128> {
+        let unit = 2f64.powi(34);
+        if p.iter().flatten().any(|&x| (x as f64 * unit).fract() != 0.0) {
+            return None;
+        }
+        let q = p.map(|v| v.map(|x| (x as f64 * unit) as i128));
+        Some((q[1][0] - q[0][0]) * (q[2][1] - q[0][1]) - (q[1][1] - q[0][1]) * (q[2][0] - q[0][0]))
+    };
+    let (mut zeros, mut naive_wrong) = (0, 0);
+    for _ in 0..200_000 {
+        let (a, b) = ([f(&mut rng), f(&mut rng)], [f(&mut rng), f(&mut rng)]);
+        // Often exactly on the line (a short binary fraction of the way).
+        let t = (1 + rng.range(15)) as f64 / 16.0;
+        let c = [(a[0] as f64 + t * (b[0] as f64 - a[0] as f64)) as f32, (a[1] as f64 + t * (b[1] as f64 - a[1] as f64)) as f32];
+        let Some(want) = exact([a, b, c]) else { continue };
+        let want = want.signum() as f64;
+        let d = |v: [f32; 2]| DVec2::new(v[0] as f64, v[1] as f64);
+        let (pa, pb, pc) = (d(a), d(b), d(c));
+        let got = geom::orient(pa, pb, pc);
+        let got = if got == 0.0 { 0.0 } else { got.signum() };
+        assert_eq!(got, want, "{a:?} {b:?} {c:?}");
+        zeros += usize::from(want == 0.0);
+        naive_wrong += usize::from({
+            let n = (pb - pa).perp_dot(pc - pa);
+            (if n == 0.0 { 0.0 } else { n.signum() }) != want
+        });
+    }
+    println!("{zeros} exactly collinear, {naive_wrong} where the plain f64 formula had the wrong sign");
+    assert!(zeros > 1000, "the cases test little");
+}
