@@ -26,7 +26,7 @@
 //! 333 333 vertices in line along its top and two corners below, can only be
 //! fanned from those two corners, and every ray that meets the bar then walks
 //! all of those boxes (a 320x240 render of the comb prism ran past 12 minutes,
-//! where the 1 000 000-index spiral prism renders in 20 s). Steiner points
+//! where the 1 000 000-index spiral prism renders in 10.9 s). Steiner points
 //! inside the face would fix that; the loader adds none.
 
 mod geom;
