@@ -2,7 +2,8 @@
 # The test command of the README: checks formatting and lints (rustfmt,
 # clippy), installs what the tests need (POV-Ray 3.7 and
 # python3 for the oracle comparison, Debian's assimp test models for the mesh
-# importer corpus) when they are missing, then runs every test of the workspace,
+# importer corpus, GNU time for the hostile tests' memory bounds) when they are
+# missing, then runs every test of the workspace,
 # then the one-node Slurm test of split rendering (scripts/slurm/test.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,6 +12,7 @@ need=()
 command -v povray >/dev/null 2>&1 || need+=(povray)
 command -v python3 >/dev/null 2>&1 || need+=(python3)
 [ -d /usr/share/assimp/models ] || need+=(assimp-testmodels)
+[ -x /usr/bin/time ] || need+=(time)
 if [ ${#need[@]} -gt 0 ]; then
   echo "scripts/test.sh: installing ${need[*]} (Debian packages)"
   SUDO=""

@@ -1,15 +1,48 @@
 //! Hostile input (issue 14): files outside the scene's folder, FIFOs, a glTF
 //! index that made gltf-json panic, deep nesting, huge polygon faces, unbounded
 //! counts. Every case is generated here; each asserts the exit status, a
-//! located message, no panic, and, where files are involved, that nothing
+//! located message, no panic, bounds on CPU time and peak memory with ten
+//! times headroom (see `measure`), and, where files are involved, that nothing
 //! outside the allowed folders was opened: through the io API's own record
-//! always, and through strace where it is installed.
+//! always, and through strace where it is installed. The assimp corpus runs
+//! through `rothray check` here too.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Output};
+use std::time::Duration;
 
 use crate::bad_input::{rothray, tmpdir};
+use crate::measure::{run_measured, run_within_limits, Limits};
+
+// Bounds: ten times what each case measured (CPU time by GNU time, whose
+// resolution is 10 ms; peak RSS), on the shared 2-core build machine.
+
+/// A tiny input (a tetrahedron, a refused path, a bad flag): process start, a
+/// parse, an error or a 16x12 picture. Measured at most 0.01 s of CPU, 5 MB.
+const TINY: Limits = Limits::new(100, 50);
+/// 20 000-deep nesting, traced: measured 0.13 s, 38 MB (the old loader aborted
+/// under 4 GB).
+const DEEP: Limits = Limits::new(1_300, 380);
+/// A prism with two 30 000-index caps, checked: measured 0.26 s, 50 MB.
+const FACE_30K: Limits = Limits::new(2_600, 500);
+/// A 1 000 001-index comb face, checked: measured 1.6 to 2.7 s (the machine's
+/// load moves it), 161 MB.
+const COMB_1M: Limits = Limits::new(27_000, 1_610);
+/// Any one file of the assimp corpus, checked: the costliest
+/// (2CylinderEngine.glb) measured 0.25 s, 47 MB.
+const CORPUS: Limits = Limits::new(2_500, 470);
+
+/// Runs a command under bounds (see `measure`); its own debug text names it.
+trait Bounded {
+    fn bounded(&mut self, limits: Limits) -> Output;
+}
+
+impl Bounded for Command {
+    fn bounded(&mut self, limits: Limits) -> Output {
+        let what = format!("{self:?}");
+        run_within_limits(std::mem::replace(self, Command::new("true")), limits, &what)
+    }
+}
 
 const CAM: &str = r#""camera":{"eye":[2,1.5,4],"target":[0.3,0.3,0.3],"up":[0,1,0],"fov_y_deg":40}"#;
 
@@ -66,31 +99,14 @@ fn tet_gltf(uri: &str, position_accessor: u32) -> String {
     )
 }
 
-/// Runs a command with a deadline (a FIFO must not block it); kills it and fails
-/// the test if the deadline passes.
-fn run_within(mut cmd: Command, limit: Duration) -> Output {
-    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
-    let t0 = Instant::now();
-    loop {
-        if child.try_wait().unwrap().is_some() {
-            return child.wait_with_output().unwrap();
-        }
-        if t0.elapsed() > limit {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("{cmd:?} did not finish within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 /// The files `args` opens, by strace, or None where strace is not installed
 /// (or not permitted).
 fn strace_opened(args: &[&std::ffi::OsStr]) -> Option<Vec<String>> {
     let log = std::env::temp_dir().join(format!("rothray-strace-{}-{}", std::process::id(), rand_suffix()));
     let mut cmd = Command::new("strace");
     cmd.args(["-f", "-qq", "-e", "trace=open,openat,openat2,creat", "-o"]).arg(&log).arg(env!("CARGO_BIN_EXE_rothray")).args(args);
-    let out = run_within(cmd, Duration::from_secs(60));
+    // strace's own cost is not the case's: only the hang guard applies.
+    let (out, _) = run_measured(cmd, Duration::from_secs(120));
     let text = std::fs::read_to_string(&log).ok()?;
     let _ = std::fs::remove_file(&log);
     if text.is_empty() && !out.status.success() {
@@ -120,7 +136,7 @@ fn assert_refused(l: &Layout, scene: &Path, why: &str) {
     let png = l.scene_dir.join("out.png");
     let mut cmd = rothray();
     cmd.arg("render").arg(scene).arg("-o").arg(&png);
-    let out = run_within(cmd, Duration::from_secs(60));
+    let out = cmd.bounded(TINY);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{}: {err}", scene.display());
     assert!(!err.contains("panicked"), "{err}");
@@ -161,13 +177,13 @@ fn meshes_outside_the_scene_folder_are_refused() {
         let f = l.scene_dir.join("link.json");
         std::fs::write(&f, mesh_scene("link.obj")).unwrap();
         assert_refused(&l, &f, "outside the allowed folders");
-        let err = stderr(&rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("x.png")).output().unwrap());
+        let err = stderr(&rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("x.png")).bounded(TINY));
         assert!(err.contains("--allow-path"), "says how to allow it: {err}");
     }
     // The control: the same mesh inside the folder renders.
     let f = l.scene_dir.join("inside.json");
     std::fs::write(&f, mesh_scene("tet.obj")).unwrap();
-    let out = rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("ok.png")).output().unwrap();
+    let out = rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("ok.png")).bounded(TINY);
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
@@ -177,7 +193,7 @@ fn allow_path_admits_an_outside_folder_and_only_it() {
     let f = l.scene_dir.join("s.json");
     std::fs::write(&f, mesh_scene("../outside/tet.obj")).unwrap();
     let png = l.scene_dir.join("allowed.png");
-    let out = rothray().arg("render").arg(&f).arg("-o").arg(&png).arg("--allow-path").arg(&l.outside).output().unwrap();
+    let out = rothray().arg("render").arg(&f).arg("-o").arg(&png).arg("--allow-path").arg(&l.outside).bounded(TINY);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(png.exists());
     // The API records the scene and the allowed mesh, and nothing else.
@@ -190,7 +206,7 @@ fn allow_path_admits_an_outside_folder_and_only_it() {
     std::fs::create_dir_all(&other).unwrap();
     let rays = l.scene_dir.join("r.csv");
     std::fs::write(&rays, "2,1.5,4,-1.7,-1.2,-3.7\n").unwrap();
-    let out = rothray().arg("trace").arg(&f).arg("--rays").arg(&rays).arg("--allow-path").arg(&other).output().unwrap();
+    let out = rothray().arg("trace").arg(&f).arg("--rays").arg(&rays).arg("--allow-path").arg(&other).bounded(TINY);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let out = rothray()
         .arg("trace")
@@ -201,8 +217,7 @@ fn allow_path_admits_an_outside_folder_and_only_it() {
         .arg(&other)
         .arg("--allow-path")
         .arg(&l.outside)
-        .output()
-        .unwrap();
+        .bounded(TINY);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).lines().nth(1).unwrap().starts_with("0,1,"), "the ray hits the allowed mesh");
     let out = rothray()
@@ -210,8 +225,7 @@ fn allow_path_admits_an_outside_folder_and_only_it() {
         .arg(&f)
         .args(["--repeats", "1", "--width", "8", "--height", "8", "--allow-path"])
         .arg(&l.outside)
-        .output()
-        .unwrap();
+        .bounded(TINY);
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
@@ -223,7 +237,7 @@ fn gltf_buffers_outside_the_folder_are_refused_even_percent_escaped() {
     std::fs::write(l.scene_dir.join("ok.gltf"), tet_gltf("tet.bin", 0)).unwrap();
     let f = l.scene_dir.join("ok.json");
     std::fs::write(&f, mesh_scene("ok.gltf")).unwrap();
-    let out = rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("ok.png")).output().unwrap();
+    let out = rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("ok.png")).bounded(TINY);
     assert!(out.status.success(), "{}", stderr(&out));
     let outside_bin = l.outside.join("tet.bin").display().to_string();
     for (name, uri) in [
@@ -239,13 +253,13 @@ fn gltf_buffers_outside_the_folder_are_refused_even_percent_escaped() {
         std::fs::write(&f, mesh_scene(&g)).unwrap();
         assert_refused(&l, &f, "outside the allowed folders");
         // `check` confines a mesh's buffers to the mesh's folder too.
-        let out = rothray().arg("check").arg(l.scene_dir.join(&g)).output().unwrap();
+        let out = rothray().arg("check").arg(l.scene_dir.join(&g)).bounded(TINY);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(2), "{err}");
         assert!(err.contains("buffer 0") && err.contains("--allow-path"), "{err}");
     }
     // Allowed, the escaped one loads.
-    let out = rothray().arg("check").arg(l.scene_dir.join("escaped.gltf")).arg("--allow-path").arg(&l.outside).output().unwrap();
+    let out = rothray().arg("check").arg(l.scene_dir.join("escaped.gltf")).arg("--allow-path").arg(&l.outside).bounded(TINY);
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
@@ -266,7 +280,7 @@ fn fifos_are_refused_not_waited_on() {
     std::fs::write(&f, mesh_scene("pipe.obj")).unwrap();
     let mut cmd = rothray();
     cmd.arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("x.png"));
-    let out = run_within(cmd, Duration::from_secs(30));
+    let out = cmd.bounded(TINY);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("objects[0].shape.mesh.path") && err.contains("FIFO") && err.contains("not a regular file"), "{err}");
@@ -276,7 +290,7 @@ fn fifos_are_refused_not_waited_on() {
     std::fs::write(&f, mesh_scene("tet.obj")).unwrap();
     let mut cmd = rothray();
     cmd.arg("trace").arg(&f).arg("--rays").arg(&rays);
-    let out = run_within(cmd, Duration::from_secs(30));
+    let out = cmd.bounded(TINY);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("rays.csv") && err.contains("FIFO"), "{err}");
@@ -284,11 +298,11 @@ fn fifos_are_refused_not_waited_on() {
     mkfifo(&scene_fifo);
     let mut cmd = rothray();
     cmd.arg("render").arg(&scene_fifo).arg("-o").arg(l.scene_dir.join("x.png"));
-    let out = run_within(cmd, Duration::from_secs(30));
+    let out = cmd.bounded(TINY);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let mut cmd = rothray();
     cmd.arg("check").arg(&fifo);
-    let out = run_within(cmd, Duration::from_secs(30));
+    let out = cmd.bounded(TINY);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(stderr(&out).contains("FIFO"));
 }
@@ -299,14 +313,14 @@ fn a_gltf_accessor_that_does_not_exist_is_an_error_not_a_panic() {
     std::fs::write(l.scene_dir.join("tet.bin"), tet_bin()).unwrap();
     let g = l.scene_dir.join("p99.gltf");
     std::fs::write(&g, tet_gltf("tet.bin", 99)).unwrap();
-    let out = rothray().arg("check").arg(&g).output().unwrap();
+    let out = rothray().arg("check").arg(&g).bounded(TINY);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(!err.contains("panicked") && !err.contains("crashed"), "{err}");
     assert!(err.contains("p99.gltf") && err.contains("attributes.POSITION") && err.contains("accessor 99"), "{err}");
     let f = l.scene_dir.join("s.json");
     std::fs::write(&f, mesh_scene("p99.gltf")).unwrap();
-    let out = rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("x.png")).output().unwrap();
+    let out = rothray().arg("render").arg(&f).arg("-o").arg(l.scene_dir.join("x.png")).bounded(TINY);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(!err.contains("panicked") && !err.contains("crashed"), "{err}");
@@ -314,23 +328,8 @@ fn a_gltf_accessor_that_does_not_exist_is_an_error_not_a_panic() {
     // Indices and morph targets are checked the same way.
     let text = tet_gltf("tet.bin", 0).replace(r#""indices":1"#, r#""indices":1,"targets":[{"POSITION":42}]"#);
     std::fs::write(&g, text).unwrap();
-    let err = stderr(&rothray().arg("check").arg(&g).output().unwrap());
+    let err = stderr(&rothray().arg("check").arg(&g).bounded(TINY));
     assert!(err.contains("targets[0].POSITION") && err.contains("accessor 42") && !err.contains("panicked"), "{err}");
-}
-
-/// Peak resident set of a command, by /usr/bin/time -v, in KB; None where
-/// GNU time is not installed.
-fn peak_rss_kb(args: &[&std::ffi::OsStr]) -> Option<(Output, u64)> {
-    let time = Path::new("/usr/bin/time");
-    if !time.exists() {
-        return None;
-    }
-    let mut cmd = Command::new(time);
-    cmd.arg("-v").arg(env!("CARGO_BIN_EXE_rothray")).args(args);
-    let out = run_within(cmd, Duration::from_secs(300));
-    let err = stderr(&out);
-    let kb = err.lines().find_map(|l| l.trim().strip_prefix("Maximum resident set size (kbytes): ")?.parse().ok())?;
-    Some((out, kb))
 }
 
 #[test]
@@ -364,18 +363,8 @@ fn deep_nesting_costs_memory_linear_in_depth_and_short_leaf_names() {
     std::fs::write(&f, format!(r#"{{"camera":{{"eye":[0,0,5],"target":[0,0,0],"up":[0,1,0],"fov_y_deg":40}},"image":{{"width":8,"height":8}},"objects":[{{"shape":{body}}}]}}"#)).unwrap();
     let rays = dir.join("r.csv");
     std::fs::write(&rays, "0,0,5,0,0,-1\n").unwrap();
-    let args: [&std::ffi::OsStr; 4] = ["trace".as_ref(), f.as_os_str(), "--rays".as_ref(), rays.as_os_str()];
-    let out = match peak_rss_kb(&args) {
-        Some((out, kb)) => {
-            println!("depth {depth}: peak RSS {kb} KB");
-            assert!(kb < 1_000_000, "depth {depth} took {kb} KB (the old loader aborted under 4 GB)");
-            out
-        }
-        None => {
-            println!("/usr/bin/time is not installed: memory not measured");
-            rothray().args(args).output().unwrap()
-        }
-    };
+    // The old loader aborted under 4 GB here.
+    let out = rothray().arg("trace").arg(&f).arg("--rays").arg(&rays).bounded(DEEP);
     assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     let hit = text.lines().nth(1).unwrap();
@@ -418,11 +407,8 @@ fn a_30000_index_face_is_triangulated_into_a_closed_solid() {
     let n = 30_000;
     let p = dir.join("prism.obj");
     std::fs::write(&p, prism_obj(n)).unwrap();
-    // The old fan made `check` quadratic (over two minutes); the deadline is a
-    // hang guard, not a timing assertion.
-    let mut cmd = rothray();
-    cmd.arg("check").arg(&p).arg("--json");
-    let out = run_within(cmd, Duration::from_secs(120));
+    // The old fan made `check` quadratic (over two minutes).
+    let out = rothray().arg("check").arg(&p).arg("--json").bounded(FACE_30K);
     assert!(out.status.success(), "{}", stderr(&out));
     let j: serde_json::Value = serde_json::from_str(String::from_utf8_lossy(&out.stdout).trim()).unwrap();
     assert_eq!(j["triangles"], 2 * (n - 2) + 2 * n, "{j}");
@@ -433,12 +419,83 @@ fn a_30000_index_face_is_triangulated_into_a_closed_solid() {
     assert!((vol - std::f64::consts::PI).abs() < 1e-3, "volume {vol}");
 }
 
+/// A comb face of `teeth` teeth of pseudo-random heights (from `seed`), on
+/// integer coordinates, as OBJ: 3 teeth + 2 vertices, counter-clockwise.
+fn comb_face_obj(teeth: usize, seed: u64) -> String {
+    let mut p: Vec<[i64; 2]> = vec![[2 * teeth as i64, 0]];
+    let mut h = seed;
+    for t in (0..teeth as i64).rev() {
+        h = h.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let y = 2 + (h >> 61) as i64;
+        p.push([2 * t + 2, y]);
+        p.push([2 * t + 1, y]);
+        p.push(if t > 0 { [2 * t + 1, 1] } else { [0, y] });
+    }
+    p.push([0, 0]);
+    let mut s: String = p.iter().map(|q| format!("v {} {} 0\n", q[0], q[1])).collect();
+    s.push('f');
+    s.extend((1..=p.len()).map(|k| format!(" {k}")));
+    s.push('\n');
+    s
+}
+
+/// The issue's 1 000 000-index face, as a comb (333 333 merge vertices, no
+/// fan or halving valid): triangulated by the sweep without a warning, then
+/// refused as a solid (one face encloses nothing), within bounds; the old
+/// ear clipping was quadratic and ran past a minute.
+#[test]
+fn a_million_index_comb_face_is_triangulated_within_bounds() {
+    let seed = 0x5eed_0018;
+    println!("seed {seed:#x}");
+    let dir = tmpdir("comb1m");
+    let p = dir.join("comb.obj");
+    std::fs::write(&p, comb_face_obj(333_333, seed)).unwrap();
+    let out = rothray().arg("check").arg(&p).bounded(COMB_1M);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("comb.obj") && err.contains("encloses no volume"), "{err}");
+    assert!(!err.contains("warning") && !err.contains("panicked"), "{err}");
+}
+
+/// Every OBJ / glTF / GLB of the assimp corpus through `rothray check`: exit 0,
+/// or 2 with a message naming the file; no panic; nothing opened outside the
+/// file's folder (the io API's record); each within bounds.
+#[test]
+fn the_assimp_corpus_is_checked_within_bounds() {
+    let Some((root, files)) = crate::assimp_corpus::assimp_mesh_files() else {
+        println!("SKIPPED: assimp-testmodels not installed (apt-get install assimp-testmodels)");
+        return;
+    };
+    let (mut ok, mut refused) = (0, 0);
+    for f in &files {
+        let out = rothray().arg("check").arg(f).bounded(CORPUS);
+        let err = stderr(&out);
+        assert!(!err.contains("panicked") && !err.contains("crashed"), "{}: {err}", f.display());
+        match out.status.code() {
+            Some(0) => ok += 1,
+            Some(2) => {
+                assert!(err.contains(&*f.display().to_string()), "not located: {err}");
+                refused += 1;
+            }
+            c => panic!("{}: exit {c:?}: {err}", f.display()),
+        }
+        let folder = f.parent().unwrap().canonicalize().unwrap();
+        if let Ok((real, files)) = rothray_io::user_mesh(f, &Default::default()) {
+            let _ = rothray_io::load_mesh_in(&real, &files);
+            let opened = files.opened();
+            assert!(opened.iter().all(|p| p.starts_with(&folder)), "{}: opened {opened:?}", f.display());
+        }
+    }
+    println!("{} files under {}: {ok} checked, {refused} refused with a located error", files.len(), root.display());
+    assert!(ok + refused == files.len() && ok > 10);
+}
+
 #[test]
 fn obj_faces_with_fewer_than_three_vertices_are_warned_with_their_line() {
     let dir = tmpdir("shortface");
     let p = dir.join("short.obj");
     std::fs::write(&p, format!("{TET_OBJ}f 1 2\nf 3\n")).unwrap();
-    let out = rothray().arg("check").arg(&p).output().unwrap();
+    let out = rothray().arg("check").arg(&p).bounded(TINY);
     let err = stderr(&out);
     assert!(out.status.success(), "{err}");
     assert!(err.contains("warning") && err.contains("line 9, 10") && err.contains("fewer than 3 vertices"), "{err}");
@@ -467,7 +524,7 @@ fn command_line_counts_are_bounded() {
                 a => cmd.arg(a),
             };
         }
-        let out = run_within(cmd, Duration::from_secs(30));
+        let out = cmd.bounded(TINY);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(want), "{args:?}: {err}");

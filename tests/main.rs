@@ -3,12 +3,15 @@
 //! Every randomized test prints its seed; rerun a failure with the same seed
 //! by editing the constant it names.
 
+#[path = "../io/src/assimp_corpus.rs"]
+mod assimp_corpus;
 mod bad_input;
 mod cli;
 mod coincident;
 mod csg_oracle;
 mod hostile;
 mod leaf_oracle;
+mod measure;
 mod oracle;
 mod povray;
 mod render_flat;

@@ -10,6 +10,8 @@
 //! * images: [`write_png`].
 #![warn(missing_docs)]
 
+#[cfg(test)]
+mod assimp_corpus;
 pub mod files;
 pub mod json;
 pub mod json_path;

@@ -309,10 +309,9 @@ fn load_obj(path: &Path, bytes: &[u8]) -> Result<LoadedMesh, MeshLoadError> {
     if !forced.is_empty() {
         let more = if forced.len() > 5 { format!(" and {} more", forced.len() - 5) } else { String::new() };
         warnings.push(format!(
-            "{}: {}{more}: non-convex face(s) too large to ear-clip (more than {} vertices) or not simple, split by halving; triangles may lie outside the face",
+            "{}: {}{more}: face(s) not simple in their plane (an edge crosses or touches another, or two vertices coincide), split by halving; triangles may lie outside the face",
             path.display(),
             forced.iter().take(5).cloned().collect::<Vec<_>>().join(", "),
-            polygon::MAX_EAR_CLIP
         ));
     }
     Ok((pos, tris, warnings))

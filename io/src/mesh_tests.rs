@@ -311,28 +311,10 @@ fn mesh_bunny_report() {
 /// MeshData::new without a panic (errors are fine).
 #[test]
 fn mesh_assimp_testmodels_do_not_panic() {
-    let roots = ["/usr/share/assimp/models", "/usr/share/assimp-testmodels"];
-    let Some(root) = roots.iter().map(Path::new).find(|p| p.is_dir()) else {
+    let Some((root, files)) = crate::assimp_corpus::assimp_mesh_files() else {
         println!("SKIPPED: assimp-testmodels not installed (apt-get install assimp-testmodels)");
         return;
     };
-    let mut files = vec![];
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&dir) else { continue };
-        for e in rd.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if matches!(
-                p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref(),
-                Some("obj" | "gltf" | "glb")
-            ) {
-                files.push(p);
-            }
-        }
-    }
-    files.sort();
     let (mut loaded, mut solid, mut failed, mut panicked) = (0, 0, 0, vec![]);
     for f in &files {
         let r = std::panic::catch_unwind(|| match load_mesh(f) {
@@ -361,4 +343,84 @@ fn mesh_assimp_testmodels_do_not_panic() {
         panicked.len()
     );
     assert!(panicked.is_empty(), "panicked on {panicked:?}");
+}
+
+/// A comb face of `teeth` teeth (heights from `seed`), on integer coordinates:
+/// 3 teeth + 2 vertices, counter-clockwise. Returns the OBJ `v` lines, the
+/// face's index list, and its shoelace area.
+fn comb_obj(teeth: usize, seed: u64) -> (String, Vec<usize>, f64) {
+    let mut p: Vec<[i64; 2]> = vec![[2 * teeth as i64, 0]];
+    let mut h = seed;
+    for t in (0..teeth as i64).rev() {
+        h = h.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let y = 2 + (h >> 61) as i64;
+        p.push([2 * t + 2, y]);
+        p.push([2 * t + 1, y]);
+        p.push(if t > 0 { [2 * t + 1, 1] } else { [0, y] });
+    }
+    p.push([0, 0]);
+    let area = (0..p.len()).map(|i| (p[i][0] * p[(i + 1) % p.len()][1] - p[i][1] * p[(i + 1) % p.len()][0]) as f64).sum::<f64>() * 0.5;
+    let v: String = p.iter().map(|q| format!("v {} {} 0\n", q[0], q[1])).collect();
+    (v, (1..=p.len()).collect(), area)
+}
+
+/// A 1 000 001-index comb face through the OBJ loader: n - 2 triangles, none
+/// turned over, of the face's shoelace area, and no warning (the sweep took it;
+/// the old loader halved it across the gaps, with a warning). A smaller comb
+/// prism is a closed solid of the right volume.
+#[test]
+fn mesh_obj_million_index_comb_face() {
+    let seed = 0x5eed_0017;
+    println!("seed {seed:#x}");
+    let d = scratch("comb");
+    let (v, face, area) = comb_obj(333_333, seed);
+    let f: String = face.iter().map(|k| format!(" {k}")).collect();
+    let p = write(&d, "comb.obj", format!("{v}f{f}\n"));
+    let (pos, tris, warnings) = load_mesh(&p).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(tris.len(), face.len() - 2);
+    let area2 = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|k| pos[k as usize].as_dvec3());
+        (b - a).cross(c - a).z
+    };
+    assert!(tris.iter().all(|t| area2(t) >= 0.0), "a triangle is turned over");
+    assert_eq!(tris.iter().map(area2).sum::<f64>() * 0.5, area, "integer coordinates: exact");
+
+    let (v, face, area) = comb_obj(3_000, seed);
+    let n = face.len();
+    let mut s = v.clone();
+    s.extend(v.lines().map(|l| format!("{}1\n", l.strip_suffix('0').unwrap())));
+    s.push('f');
+    s.extend(face.iter().rev().map(|k| format!(" {k}")));
+    s.push_str("\nf");
+    s.extend(face.iter().map(|k| format!(" {}", k + n)));
+    s.push('\n');
+    for i in 1..=n {
+        let j = i % n + 1;
+        s.push_str(&format!("f {i} {j} {} {}\n", j + n, i + n));
+    }
+    let p = write(&d, "prism.obj", s);
+    let (pos, tris, warnings) = load_mesh(&p).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let r = MeshData::new(pos, tris, InsideRule::Orientation).unwrap().report();
+    assert!(r.closed && r.consistently_oriented && r.usable_as_solid, "{r:?}");
+    assert_eq!(r.self_intersections, Some(0));
+    assert!((r.volume - area).abs() < 1e-9 * area, "volume {} vs {area}", r.volume);
+}
+
+/// A face that crosses itself (a bow tie) and one that touches itself (a
+/// pinch) are halved, warned with their lines; a face of 1 or 2 vertices is
+/// skipped, warned with its line.
+#[test]
+fn mesh_obj_faces_that_are_not_simple_or_too_short_are_warned_with_their_line() {
+    let d = scratch("notsimple");
+    let text = "v 0 0 0\nv 1 1 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 2 2 0\nv 0.5 0.5 0\n\
+f 1 2 3 4\nf 1 3 5 6 7 2 4\nf 1 3\nf 1 2 3\n";
+    let p = write(&d, "bad.obj", text);
+    let (_, tris, warnings) = load_mesh(&p).unwrap();
+    assert_eq!(tris.len(), 2 + 5 + 1, "every face of 3 or more vertices gives n - 2 triangles");
+    let w = warnings.join("\n");
+    assert!(w.contains("line 8 (4 vertices), line 9 (7 vertices)"), "{w}");
+    assert!(w.contains("not simple"), "{w}");
+    assert!(w.contains("line 10") && w.contains("fewer than 3 vertices"), "{w}");
 }

@@ -1631,8 +1631,8 @@ impl MeshData {
     }
 
     /// Topology and volume summary for `rothray check`, with the number of
-    /// self-intersecting triangle pairs (computed here, on demand: a BVH box query
-    /// per triangle and exact-sign f64 segment/triangle tests).
+    /// self-intersecting triangle pairs (computed here, on demand: see
+    /// `mesh_selfx.rs`).
     pub fn report(&self) -> MeshReport {
         let mut r = self.report.clone();
         r.self_intersections = Some(self.count_self_intersections());
@@ -1642,67 +1642,8 @@ impl MeshData {
     /// Pairs of triangles that share no vertex and whose interiors cross (an edge
     /// of one passes through the other). Coplanar overlaps are not counted.
     pub fn count_self_intersections(&self) -> usize {
-        let nodes = &self.bvh.nodes;
-        let mut count = 0;
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
-        for (i, a) in self.tris.iter().enumerate() {
-            let (lo, hi) = (a[0].min(a[1]).min(a[2]), a[0].max(a[1]).max(a[2]));
-            stack.clear();
-            stack.push(0);
-            while let Some(ni) = stack.pop() {
-                let n = &nodes[ni as usize];
-                if n.min.cmpgt(hi).any() || n.max.cmplt(lo).any() {
-                    continue;
-                }
-                if n.count == 0 {
-                    stack.push(n.first);
-                    stack.push(n.first + 1);
-                    continue;
-                }
-                for j in n.first..n.first + n.count {
-                    let j = j as usize;
-                    if j <= i {
-                        continue;
-                    }
-                    let b = &self.tris[j];
-                    if a.iter().any(|p| b.contains(p)) {
-                        continue;
-                    }
-                    if triangles_cross(a, b) {
-                        count += 1;
-                    }
-                }
-            }
-        }
-        count
+        selfx::count(&self.bvh.nodes, &self.tris)
     }
-}
-
-/// Sign of the volume of the tetrahedron `(a, b, c, d)` (f64; exact enough for
-/// f32 inputs of similar magnitude).
-fn orient3(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> f64 {
-    (b - a).cross(c - a).dot(d - a)
-}
-
-/// Does segment `pq` pass through the interior of triangle `abc`?
-fn segment_crosses(p: DVec3, q: DVec3, a: DVec3, b: DVec3, c: DVec3) -> bool {
-    let sp = orient3(a, b, c, p);
-    let sq = orient3(a, b, c, q);
-    if !(sp * sq < 0.0) {
-        return false;
-    }
-    let u = orient3(p, q, a, b);
-    let v = orient3(p, q, b, c);
-    let w = orient3(p, q, c, a);
-    (u > 0.0 && v > 0.0 && w > 0.0) || (u < 0.0 && v < 0.0 && w < 0.0)
-}
-
-/// Two triangles cross when an edge of one passes through the other.
-fn triangles_cross(a: &[Vec3; 3], b: &[Vec3; 3]) -> bool {
-    let a = a.map(|p| p.as_dvec3());
-    let b = b.map(|p| p.as_dvec3());
-    (0..3).any(|e| segment_crosses(a[e], a[(e + 1) % 3], b[0], b[1], b[2]))
-        || (0..3).any(|e| segment_crosses(b[e], b[(e + 1) % 3], a[0], a[1], a[2]))
 }
 
 /// Insertion sort for the common short lists; `first(c)` breaks ties in `t`.
@@ -1732,6 +1673,9 @@ fn sort_crossings(xs: &mut [Crossing], first: impl Fn(&Crossing) -> bool) {
 
 #[path = "mesh_wide.rs"]
 mod wide;
+
+#[path = "mesh_selfx.rs"]
+mod selfx;
 
 #[cfg(test)]
 #[path = "mesh_tests.rs"]

@@ -808,3 +808,85 @@ fn mesh_order4_sorts_hit_children() {
         }
     }
 }
+
+/// The reference for the self-intersection count: every pair, each edge
+/// tested on its own (the straightforward form of the test, kept here as the
+/// oracle for the pruned walk and the shared plane signs).
+fn brute_self_intersections(tris: &[[Vec3; 3]]) -> usize {
+    fn o3(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> f64 {
+        (b - a).cross(c - a).dot(d - a)
+    }
+    fn seg(p: DVec3, q: DVec3, a: DVec3, b: DVec3, c: DVec3) -> bool {
+        if !(o3(a, b, c, p) * o3(a, b, c, q) < 0.0) {
+            return false;
+        }
+        let (u, v, w) = (o3(p, q, a, b), o3(p, q, b, c), o3(p, q, c, a));
+        (u > 0.0 && v > 0.0 && w > 0.0) || (u < 0.0 && v < 0.0 && w < 0.0)
+    }
+    let mut n = 0;
+    for i in 0..tris.len() {
+        for j in i + 1..tris.len() {
+            let (a, b) = (tris[i], tris[j]);
+            if a.iter().any(|p| b.contains(p)) {
+                continue;
+            }
+            let (a, b) = (a.map(|p| p.as_dvec3()), b.map(|p| p.as_dvec3()));
+            if (0..3).any(|e| seg(a[e], a[(e + 1) % 3], b[0], b[1], b[2])) || (0..3).any(|e| seg(b[e], b[(e + 1) % 3], a[0], a[1], a[2])) {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// The BVH self-walk counts what the all-pairs reference counts, on seeded
+/// random triangle soups: some on a small grid (many triangles flat in an axis
+/// plane, touching, sharing corners: what the flat-node pruning acts on), some
+/// in general position.
+#[test]
+fn self_intersection_count_matches_all_pairs() {
+    let seed = 0x5e1f_0014;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut total = 0;
+    for case in 0..200 {
+        let grid = case % 2 == 0;
+        let pool: Vec<Vec3> = (0..3 + rng.gen_range(0..60))
+            .map(|_| {
+                if grid {
+                    Vec3::new(rng.gen_range(0..4) as f32, rng.gen_range(0..4) as f32, rng.gen_range(0..4) as f32)
+                } else {
+                    Vec3::new(rng.gen(), rng.gen(), rng.gen())
+                }
+            })
+            .collect();
+        let tris: Vec<[Vec3; 3]> = (0..1 + rng.gen_range(0..150))
+            .map(|_| {
+                let a = pool[rng.gen_range(0..pool.len())];
+                let mut b = pool[rng.gen_range(0..pool.len())];
+                let mut c = pool[rng.gen_range(0..pool.len())];
+                if grid && rng.gen_bool(0.5) {
+                    // Flat in an axis: copy one coordinate.
+                    let k = rng.gen_range(0..3);
+                    b[k] = a[k];
+                    c[k] = a[k];
+                }
+                [a, b, c]
+            })
+            .collect();
+        let boxes: Vec<Aabb> = tris
+            .iter()
+            .map(|t| {
+                let mut b = Aabb::EMPTY;
+                t.iter().for_each(|&p| b.grow(p));
+                b
+            })
+            .collect();
+        let bvh = FlatBvh::build_binary(&boxes, MAX_LEAF);
+        let slots: Vec<[Vec3; 3]> = bvh.prims.iter().map(|&p| tris[p as usize]).collect();
+        let want = brute_self_intersections(&tris);
+        assert_eq!(selfx::count(&bvh.nodes, &slots), want, "case {case} (seed {seed:#x}), {} triangles", tris.len());
+        total += want;
+    }
+    assert!(total > 1000, "only {total} crossings: the cases test little");
+}
