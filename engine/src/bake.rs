@@ -1,7 +1,8 @@
 //! The bake systems: from a `hecs::World` to the [`RenderScene`]'s tables.
 //! [`find_objects`] lists the root solids, [`bake_scene`] flattens each
 //! tree into the post-order CSG program and the SoA leaf table and builds the
-//! object BVHs, [`sync_scene`] re-bakes when [`fingerprint_world`] changed.
+//! object BVHs, [`sync_scene`] re-bakes the objects that changed (see
+//! [`crate::live`]).
 
 use glam::{DAffine3, Vec3};
 use hecs::{Entity, World};
@@ -199,16 +200,42 @@ pub fn fingerprint_world(world: &World) -> u64 {
     h.finish()
 }
 
-/// System: re-bakes `scene` from `world` if anything it reads changed since the
-/// last call (returns whether it baked).
+/// System: brings `scene` up to date with `world`, re-baking only the objects
+/// whose inputs changed since the last call (returns whether anything was
+/// baked). The first call bakes everything; see [`crate::live`].
 pub fn sync_scene(world: &mut World, scene: &mut RenderScene) -> Result<bool, BakeError> {
-    let fp = fingerprint_world(world);
-    if scene.bake_count > 0 && fp == scene.fingerprint {
-        return Ok(false);
-    }
-    bake_scene(world, scene)?;
-    scene.fingerprint = fp;
-    Ok(true)
+    crate::live::sync_live(world, scene)
+}
+
+/// Where one object's rows sit in the baked tables (half-open ranges).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Slice {
+    /// Program nodes (the root is the last).
+    pub nodes: [u32; 2],
+    /// Entries of `Program::children`.
+    pub children: [u32; 2],
+    /// Rows of the leaf table and of `leaf_info`.
+    pub leaves: [u32; 2],
+    /// Wide-node BVHs.
+    pub wides: [u32; 2],
+    /// Entities of the tree (in the live state's member list).
+    pub members: [u32; 2],
+}
+
+/// A world (or some of its objects) baked into tables, before they go into
+/// a scene.
+#[derive(Default)]
+pub(crate) struct Baked {
+    pub leaves: LeafTable,
+    pub leaf_info: Vec<LeafInfo>,
+    pub objects: Vec<ObjectInfo>,
+    pub program: Program,
+    /// Per object, its rows.
+    pub slices: Vec<Slice>,
+    /// Per object, the entities of its tree (a shared child once per use).
+    pub members: Vec<Entity>,
+    /// Leaves named by their row (no `Name`): their name follows the row.
+    pub unnamed: Vec<u32>,
 }
 
 enum Visit {
@@ -216,143 +243,207 @@ enum Visit {
     Exit(Entity, Op, usize),
 }
 
-/// System: bakes every object of `world` into `scene` (leaf table in pre-order of
-/// the trees, CSG program, BVHs). Iterative, so any nesting depth works.
-pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeError> {
-    let roots = find_objects(world);
-    let mut leaves = LeafTable::default();
-    let mut leaf_info = Vec::new();
-    let mut objects = Vec::new();
-    // Program nodes reference leaves by index; build leaves first in a pass that
-    // also emits the program, via a builder that borrows the leaf table lazily.
+/// Where [`bake_object`] writes.
+struct ObjectSink<'a> {
+    baked: &'a mut Baked,
+    ops: &'a mut Vec<ProgOp>,
+    on_path: &'a mut std::collections::HashSet<Entity>,
+    tolerance: f32,
+}
+
+/// Flattens the tree of `root` (object `oi`) into leaf rows, `leaf_info`
+/// rows, member entities and post-order ops (ending with its `Root`).
+/// Iterative, so any nesting depth works.
+fn bake_object(world: &World, root: Entity, oi: u32, sink: &mut ObjectSink) -> Result<(), BakeError> {
+    let ObjectSink { baked, ops, on_path, tolerance } = sink;
+    let (leaves, leaf_info) = (&mut baked.leaves, &mut baked.leaf_info);
+    let mut stack = vec![Visit::Enter(root, DAffine3::IDENTITY, None)];
+    while let Some(v) = stack.pop() {
+        match v {
+            Visit::Enter(e, parent, color) => {
+                let Ok(er) = world.entity(e) else { return Err(BakeError::NotASolid { entity: e }) };
+                baked.members.push(e);
+                let global = parent * er.get::<&Transform>().map(|t| t.0).unwrap_or(DAffine3::IDENTITY);
+                let color = er.get::<&Material>().map(|m| m.color).or(color);
+                if let Some(desc) = leaf_desc(world, e) {
+                    let bad = |error: rothray_primitives::ShapeError| BakeError::BadShape { entity: e, name: name_of(world, e), error };
+                    let pushed = match desc {
+                        LeafDesc::Analytic(shape) => leaves.push(&shape, &global),
+                        LeafDesc::Swept(d) => {
+                            let data = SweptSphereData::new(&d, *tolerance).map_err(bad)?;
+                            leaves.push_data(&LeafData::SweptSphere(Arc::new(data)), &global)
+                        }
+                        LeafDesc::GenCyl(d) => {
+                            let data = GenCylData::new(&d, *tolerance).map_err(bad)?;
+                            leaves.push_data(&LeafData::GenCylinder(Arc::new(data)), &global)
+                        }
+                        LeafDesc::Mesh(m) => leaves.push_data(&LeafData::Mesh(m), &global),
+                    };
+                    let idx = pushed.map_err(|err| match err {
+                        LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
+                        LeafError::SingularTransform => BakeError::SingularTransform { entity: e, name: name_of(world, e) },
+                    })?;
+                    let name = name_of(world, e).unwrap_or_else(|| {
+                        baked.unnamed.push(idx);
+                        format!("leaf{idx}")
+                    });
+                    leaf_info.push(LeafInfo { entity: e, name, color: color.unwrap_or(Vec3::splat(0.8)), object: oi });
+                    ops.push(ProgOp::Leaf(idx));
+                } else if let Some(node) = er.get::<&CsgNode>() {
+                    if node.children.is_empty() {
+                        return Err(BakeError::BadNode { entity: e, message: "CSG node without children".into() });
+                    }
+                    if !on_path.insert(e) {
+                        return Err(BakeError::BadNode { entity: e, message: "CSG node is its own ancestor".into() });
+                    }
+                    stack.push(Visit::Exit(e, node.op, node.children.len()));
+                    for &c in node.children.iter().rev() {
+                        if !is_solid(world, c) {
+                            return Err(BakeError::NotASolid { entity: c });
+                        }
+                        stack.push(Visit::Enter(c, global, color));
+                    }
+                } else {
+                    return Err(BakeError::NotASolid { entity: e });
+                }
+            }
+            Visit::Exit(e, op, n) => {
+                on_path.remove(&e);
+                ops.push(ProgOp::Op(op, n as u32));
+            }
+        }
+    }
+    ops.push(ProgOp::Root(oi));
+    Ok(())
+}
+
+/// Bakes the trees of `roots` (as objects `0..`) into fresh tables: leaves in
+/// pre-order of the trees, the CSG program, each object's rows.
+pub(crate) fn bake_objects(world: &World, roots: &[Entity], tolerance: f32) -> Result<Baked, BakeError> {
+    let mut baked = Baked::default();
+    // Program nodes reference leaves by index: the leaves are pushed first, in
+    // a pass that also records the program's ops, replayed afterwards.
     let mut ops: Vec<ProgOp> = Vec::new();
     let mut on_path = std::collections::HashSet::new();
     for (oi, &root) in roots.iter().enumerate() {
-        let mut stack = vec![Visit::Enter(root, DAffine3::IDENTITY, None)];
-        while let Some(v) = stack.pop() {
-            match v {
-                Visit::Enter(e, parent, color) => {
-                    let Ok(er) = world.entity(e) else { return Err(BakeError::NotASolid { entity: e }) };
-                    let global = parent * er.get::<&Transform>().map(|t| t.0).unwrap_or(DAffine3::IDENTITY);
-                    let color = er.get::<&Material>().map(|m| m.color).or(color);
-                    if let Some(desc) = leaf_desc(world, e) {
-                        let bad = |error: rothray_primitives::ShapeError| BakeError::BadShape { entity: e, name: name_of(world, e), error };
-                        let pushed = match desc {
-                            LeafDesc::Analytic(shape) => leaves.push(&shape, &global),
-                            LeafDesc::Swept(d) => {
-                                let data = SweptSphereData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
-                                leaves.push_data(&LeafData::SweptSphere(Arc::new(data)), &global)
-                            }
-                            LeafDesc::GenCyl(d) => {
-                                let data = GenCylData::new(&d, scene.tolerance_or_default()).map_err(bad)?;
-                                leaves.push_data(&LeafData::GenCylinder(Arc::new(data)), &global)
-                            }
-                            LeafDesc::Mesh(m) => leaves.push_data(&LeafData::Mesh(m), &global),
-                        };
-                        let idx = pushed.map_err(|err| match err {
-                            LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
-                            LeafError::SingularTransform => BakeError::SingularTransform { entity: e, name: name_of(world, e) },
-                        })?;
-                        leaf_info.push(LeafInfo {
-                            entity: e,
-                            name: name_of(world, e).unwrap_or_else(|| format!("leaf{idx}")),
-                            color: color.unwrap_or(Vec3::splat(0.8)),
-                            object: oi as u32,
-                        });
-                        ops.push(ProgOp::Leaf(idx));
-                    } else if let Some(node) = er.get::<&CsgNode>() {
-                        if node.children.is_empty() {
-                            return Err(BakeError::BadNode { entity: e, message: "CSG node without children".into() });
-                        }
-                        if !on_path.insert(e) {
-                            return Err(BakeError::BadNode { entity: e, message: "CSG node is its own ancestor".into() });
-                        }
-                        stack.push(Visit::Exit(e, node.op, node.children.len()));
-                        for &c in node.children.iter().rev() {
-                            if !is_solid(world, c) {
-                                return Err(BakeError::NotASolid { entity: c });
-                            }
-                            stack.push(Visit::Enter(c, global, color));
-                        }
-                    } else {
-                        return Err(BakeError::NotASolid { entity: e });
-                    }
-                }
-                Visit::Exit(e, op, n) => {
-                    on_path.remove(&e);
-                    ops.push(ProgOp::Op(op, n as u32));
-                }
-            }
-        }
-        ops.push(ProgOp::Root(oi as u32));
-        objects.push(ObjectInfo {
+        let (l0, m0) = (baked.leaves.len() as u32, baked.members.len() as u32);
+        let mut sink = ObjectSink { baked: &mut baked, ops: &mut ops, on_path: &mut on_path, tolerance };
+        bake_object(world, root, oi as u32, &mut sink)?;
+        let (l1, m1) = (baked.leaves.len() as u32, baked.members.len() as u32);
+        baked.slices.push(Slice { leaves: [l0, l1], members: [m0, m1], ..Slice::default() });
+        baked.objects.push(ObjectInfo {
             entity: root,
             name: name_of(world, root).unwrap_or_else(|| format!("object{oi}")),
             root: 0,
             bounds: Aabb::EMPTY,
         });
     }
-    let program = replay(&ops, &leaves, &mut objects);
-    // Objects BVH over the bounded objects.
+    baked.program = replay(&ops, &baked.leaves, &mut baked.objects, &mut baked.slices);
+    Ok(baked)
+}
+
+/// System: bakes every object of `world` into `scene` (leaf table in pre-order of
+/// the trees, CSG program, BVHs).
+pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeError> {
+    let roots = find_objects(world);
+    let baked = bake_objects(world, &roots, scene.tolerance_or_default())?;
+    install_baked(scene, baked, ObjectTrees::Static);
+    Ok(())
+}
+
+/// Which object BVHs a scene gets.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ObjectTrees {
+    /// obvhs' `CwBvh` (fastest to trace, cannot be refit).
+    Static,
+    /// Binary trees that [`crate::refit`] updates in place.
+    Live,
+}
+
+/// Moves baked tables into `scene` and builds what depends on all objects:
+/// the object BVHs, the packet paths, the scene's bounds and tolerance.
+pub(crate) fn install_baked(scene: &mut RenderScene, baked: Baked, trees: ObjectTrees) {
+    let Baked { leaves, leaf_info, objects, program, .. } = baked;
+    scene.leaves = leaves;
+    scene.program = program;
+    scene.objects = objects;
+    scene.leaf_info = leaf_info;
+    build_object_trees(scene, trees);
+    bake_packet_paths(scene);
+    scene.redo_window = scene.objects.iter().map(|o| redo_window_of(&scene.program, &scene.leaves, o)).collect();
+    let bounds = scene_bounds(scene);
+    set_scene_bounds(scene, bounds);
+    scene.bake_count += 1;
+}
+
+/// The length past an unsure nearest-mode result that an object's full redo
+/// tries first (see `RenderScene::redo_window`).
+pub(crate) fn redo_window_of(program: &Program, leaves: &LeafTable, o: &ObjectInfo) -> f32 {
+    let b = &o.bounds;
+    let useful = subtree_has_mesh(program, leaves, o.root) && b.is_finite() && !b.is_empty();
+    if useful {
+        0.1 * b.diagonal_length()
+    } else {
+        0.0
+    }
+}
+
+/// Builds the object BVH and the cull tree over the bounded objects, and
+/// lists the unbounded ones.
+pub(crate) fn build_object_trees(scene: &mut RenderScene, trees: ObjectTrees) {
     let mut boxes = Vec::new();
     let mut ids = Vec::new();
     let mut unbounded = Vec::new();
-    let mut bounds = Aabb::EMPTY;
-    for (i, o) in objects.iter().enumerate() {
+    for (i, o) in scene.objects.iter().enumerate() {
         if o.bounds.is_empty() {
             continue;
         }
         if o.bounds.is_finite() {
             boxes.push(o.bounds);
             ids.push(i as u32);
-            bounds = bounds.union(&o.bounds);
         } else {
             unbounded.push(i as u32);
         }
     }
-    let mut bvh = FlatBvh::build(&boxes, 1);
-    for p in bvh.prims.iter_mut() {
+    let (mut bvh, mut cull) = match trees {
+        ObjectTrees::Static => (FlatBvh::build(&boxes, 1), FlatBvh::build_cull(&boxes, 2)),
+        ObjectTrees::Live => (FlatBvh::build_binary(&boxes, 1), FlatBvh::build_cull(&boxes, 2)),
+    };
+    for p in bvh.prims.iter_mut().chain(cull.prims.iter_mut()) {
         *p = ids[*p as usize];
     }
-    let mut cull = FlatBvh::build_cull(&boxes, 2);
-    for p in cull.prims.iter_mut() {
-        *p = ids[*p as usize];
+    scene.objects_bvh = bvh;
+    scene.objects_cull = cull;
+    scene.unbounded = unbounded;
+}
+
+/// The bounds of the finite objects; with none, the finite parts of the
+/// leaves (of live objects only: a live scene's tables hold dead rows).
+pub(crate) fn scene_bounds(scene: &RenderScene) -> Aabb {
+    let mut bounds = Aabb::EMPTY;
+    for o in &scene.objects {
+        if o.bounds.is_finite() && !o.bounds.is_empty() {
+            bounds = bounds.union(&o.bounds);
+        }
     }
     if bounds.is_empty() {
         // Only unbounded solids (or none): take the leaves' finite parts.
-        for lb in &leaves.bounds {
+        for info in scene.leaf_info.iter().enumerate().filter(|(_, l)| l.object != u32::MAX) {
+            let lb = &scene.leaves.bounds[info.0];
             if lb.is_finite() {
                 bounds = bounds.union(lb);
             }
         }
     }
+    bounds
+}
+
+/// Sets the scene's bounds and the tolerances that follow them.
+pub(crate) fn set_scene_bounds(scene: &mut RenderScene, bounds: Aabb) {
     let diag = if bounds.is_empty() { 1.0 } else { bounds.diagonal_length().max(1e-3) };
-    scene.leaves = leaves;
-    scene.program = program;
-    scene.objects = objects;
-    scene.leaf_info = leaf_info;
-    scene.objects_bvh = bvh;
-    scene.objects_cull = cull;
-    scene.unbounded = unbounded;
-    bake_packet_paths(scene);
-    scene.redo_window = scene
-        .objects
-        .iter()
-        .map(|o| {
-            let b = &o.bounds;
-            let useful = subtree_has_mesh(&scene.program, &scene.leaves, o.root) && b.is_finite() && !b.is_empty();
-            if useful {
-                0.1 * b.diagonal_length()
-            } else {
-                0.0
-            }
-        })
-        .collect();
     scene.bounds = bounds;
     scene.eps = 1e-5 * diag;
     scene.center = if bounds.is_empty() { Vec3::ZERO } else { bounds.center() };
-    scene.bake_count += 1;
-    Ok(())
 }
 
 enum ProgOp {
@@ -402,7 +493,7 @@ fn absorbed_ops(ops: &[ProgOp]) -> Vec<bool> {
 /// of unions rebuilt a BVH per level. The program is the same but for the
 /// ids of the nodes that were never read (children still come before
 /// parents, and a subtree's ids are still contiguous).
-fn replay(ops: &[ProgOp], leaves: &LeafTable, objects: &mut [ObjectInfo]) -> Program {
+fn replay(ops: &[ProgOp], leaves: &LeafTable, objects: &mut [ObjectInfo], slices: &mut [Slice]) -> Program {
     #[derive(Clone, Copy)]
     enum Val {
         Node(u32),
@@ -416,6 +507,8 @@ fn replay(ops: &[ProgOp], leaves: &LeafTable, objects: &mut [ObjectInfo]) -> Pro
     // Linked list cells: (node, next cell).
     let mut cells: Vec<(u32, u32)> = Vec::new();
     let mut flat: Vec<u32> = Vec::new();
+    // Where the current object's rows start.
+    let mut start = [0u32; 3];
     for (k, op) in ops.iter().enumerate() {
         match *op {
             ProgOp::Leaf(i) => {
@@ -466,6 +559,11 @@ fn replay(ops: &[ProgOp], leaves: &LeafTable, objects: &mut [ObjectInfo]) -> Pro
                 let Some(Val::Node(r)) = vals.pop() else { unreachable!("a root is built, never flattened into a parent") };
                 objects[oi as usize].root = r;
                 objects[oi as usize].bounds = b.program.bounds[r as usize];
+                let p = &b.program;
+                let end = [p.kind.len() as u32, p.children.len() as u32, p.wides.len() as u32];
+                let s = &mut slices[oi as usize];
+                (s.nodes, s.children, s.wides) = ([start[0], end[0]], [start[1], end[1]], [start[2], end[2]]);
+                start = end;
             }
         }
     }
@@ -483,7 +581,7 @@ fn subtree_has_mesh(program: &Program, leaves: &LeafTable, n: u32) -> bool {
 
 impl RenderScene {
     /// The swept-sphere / generalized-cylinder tolerance the bake uses.
-    fn tolerance_or_default(&self) -> f32 {
+    pub(crate) fn tolerance_or_default(&self) -> f32 {
         if self.tolerance > 0.0 {
             self.tolerance
         } else {
@@ -565,7 +663,7 @@ mod tests {
             level(&mut rng, &mut leaves, &mut ops, depth, same.then_some(k0));
             ops.push(ProgOp::Root(0));
             let (mut a, mut b) = ([object()], [object()]);
-            let pa = replay(&ops, &leaves, &mut a);
+            let pa = replay(&ops, &leaves, &mut a, &mut [Slice::default()]);
             let pb = replay_by_copies(&ops, &leaves, &mut b);
             if case == 0 {
                 assert!(pa.children.len() <= 2 * leaves.len(), "{} children for {} leaves", pa.children.len(), leaves.len());

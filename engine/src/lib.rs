@@ -27,9 +27,14 @@
 #![warn(missing_docs)]
 
 pub mod bake;
+mod changes;
 pub mod components;
+mod live;
+#[cfg(test)]
+mod live_tests;
 mod packet;
 pub mod part;
+mod refit;
 pub mod render;
 mod render_tile;
 pub mod scene;

@@ -109,7 +109,8 @@ pub struct RenderScene {
     /// Accuracy knob of the swept-sphere and generalized-cylinder solvers, relative
     /// to each shape's size (default 1e-6; see `rothray bench --tolerances`).
     pub tolerance: f32,
-    pub(crate) fingerprint: u64,
+    /// What [`crate::sync_scene`] keeps between syncs (`None` until it bakes).
+    pub(crate) live: Option<Box<crate::live::LiveState>>,
     /// Mesh leaves that nearest-hit queries ask in nearest mode, traced ahead for
     /// whole packets by [`RenderScene::intersect_packet`] (empty when there are
     /// more than [`PACKET_MESHES`]).
