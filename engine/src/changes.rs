@@ -2,15 +2,17 @@
 //! the bake reads added, changed or removed (despawns included) since the last
 //! sync.
 //!
-//! One snapshot per component type, a dense vector indexed by entity id
-//! holding the entity and a copy of the value (or a key: a mesh by its `Arc`
-//! pointer, a transform by its bits, a name by its text). A sync walks each
-//! type's query and compares with the copy: a plain pass over plain data, with
-//! no hashing and no formatting. hecs's own `ChangeTracker<T>` keeps its copy
-//! as a `Previous<T>` component inserted into the tool's entities (an
-//! archetype move per entity and per tracked type on the first sync, and a
-//! second archetype for every combination) and does not report despawns, so
-//! the engine keeps its copies to itself.
+//! One snapshot per component type: the entities and a copy of their values
+//! (or a key: a mesh by its `Arc` pointer, a transform by its bits, a name by
+//! its text), in query order. A sync walks each type's query and compares
+//! with the copy: a plain pass over plain data, with no hashing and no
+//! formatting. hecs's own `ChangeTracker<T>` keeps its copy as a
+//! `Previous<T>` component inserted into the tool's entities (an archetype
+//! move per entity and per tracked type on the first sync, and a second
+//! archetype for every combination) and does not report despawns, so the
+//! engine keeps its copies to itself.
+
+use std::collections::HashMap;
 
 use hecs::{Component, Entity, World};
 
@@ -26,93 +28,81 @@ pub struct Changes {
     pub structural: bool,
 }
 
-/// The last seen value (or key) of one component type, per entity id.
+/// The last seen value (or key) of one component type, per entity, in the
+/// order the type's query visited them last time. While the tool only changes
+/// values (no spawn, despawn, insert or remove), the query visits the same
+/// entities in the same order and a scan is one sequential pass over both.
 struct Snap<K> {
-    slots: Vec<Option<(Entity, K)>>,
-    /// Occupied slots.
-    live: usize,
+    items: Vec<(Entity, K)>,
 }
 
 impl<K> Default for Snap<K> {
     fn default() -> Self {
-        Snap { slots: Vec::new(), live: 0 }
+        Snap { items: Vec::new() }
     }
-}
-
-/// How a type's changes count: does adding, removing or changing it change
-/// which objects exist (or their order)?
-#[derive(Clone, Copy)]
-struct Kind {
-    /// Adding or removing it is structural (it makes or unmakes a solid, a
-    /// node, a hidden root, an ordered root).
-    presence: bool,
-    /// A changed value is structural too.
-    value: bool,
 }
 
 impl<K> Snap<K> {
-    /// Compares every `T` of `world` with the copy (`same`) and brings the copy
-    /// up to date (`key`, called only for what changed); records the entities
-    /// whose `T` was added, changed or removed.
-    fn scan<T: Component>(&mut self, world: &World, kind: Kind, same: impl Fn(&K, &T) -> bool, key: impl Fn(&T) -> K, out: &mut Changes) {
-        let before = self.live;
-        let mut matched = 0usize;
-        let mut replaced = Vec::new();
-        for (e, v) in world.query::<&T>().iter() {
-            let i = e.id() as usize;
-            if i >= self.slots.len() {
-                self.slots.resize_with(i + 1, || None);
-            }
-            match &mut self.slots[i] {
+    /// Compares every `T` of `world` with the copy (`compare`: `None` when
+    /// the same, else whether the change is structural) and brings the copy
+    /// up to date (`key`, called only for what changed); records the
+    /// entities whose `T` was added, changed or removed. `presence`: adding or
+    /// removing a `T` is structural.
+    fn scan<T: Component>(&mut self, world: &World, presence: bool, compare: impl Fn(&K, &T) -> Option<bool>, key: impl Fn(&T) -> K, out: &mut Changes) {
+        let mut q = world.query::<&T>();
+        let mut it = q.iter();
+        let mut i = 0;
+        while let Some((e, v)) = it.next() {
+            match self.items.get_mut(i) {
                 Some((pe, pk)) if *pe == e => {
-                    matched += 1;
-                    if !same(pk, v) {
+                    if let Some(structural) = compare(pk, v) {
                         *pk = key(v);
                         out.dirty.push(e);
-                        out.structural |= kind.value;
+                        out.structural |= structural;
                     }
+                    i += 1;
                 }
-                slot => {
-                    if let Some((old, _)) = slot.take() {
-                        // The id was reused: the old entity lost its `T`.
-                        replaced.push(old);
-                    } else {
-                        self.live += 1;
+                _ => {
+                    // The world's layout changed: match the rest by entity.
+                    let mut old: HashMap<Entity, K> = self.items.drain(i..).collect();
+                    for (e, v) in std::iter::once((e, v)).chain(it) {
+                        let k = match old.remove(&e) {
+                            Some(k) => match compare(&k, v) {
+                                None => k,
+                                Some(structural) => {
+                                    out.dirty.push(e);
+                                    out.structural |= structural;
+                                    key(v)
+                                }
+                            },
+                            None => {
+                                out.dirty.push(e);
+                                out.structural |= presence;
+                                key(v)
+                            }
+                        };
+                        self.items.push((e, k));
                     }
-                    *slot = Some((e, key(v)));
-                    out.dirty.push(e);
-                    out.structural |= kind.presence;
-                }
-            }
-        }
-        // Entries neither matched nor replaced lost their component (or their
-        // entity): only then is the whole vector swept.
-        let gone = before - matched - replaced.len();
-        if !replaced.is_empty() {
-            out.structural |= kind.presence;
-            out.dirty.extend(replaced);
-        }
-        if gone > 0 {
-            out.structural |= kind.presence;
-            for slot in self.slots.iter_mut() {
-                if let Some((e, _)) = slot {
-                    let e = *e;
-                    if world.get::<&T>(e).is_err() {
-                        *slot = None;
-                        self.live -= 1;
+                    for e in old.into_keys() {
                         out.dirty.push(e);
+                        out.structural |= presence;
                     }
+                    return;
                 }
             }
+        }
+        for (e, _) in self.items.drain(i..) {
+            out.dirty.push(e);
+            out.structural |= presence;
         }
     }
-
 }
 
 impl<T: Component + Clone + PartialEq> Snap<T> {
-    /// [`Snap::scan`] for a type compared by `PartialEq` with a copy of itself.
-    fn scan_copy(&mut self, world: &World, kind: Kind, out: &mut Changes) {
-        self.scan(world, kind, |k: &T, v: &T| k == v, T::clone, out);
+    /// [`Snap::scan`] for a shape: compared by `PartialEq` with a copy of
+    /// itself; a new value re-bakes the objects holding it.
+    fn scan_shape(&mut self, world: &World, out: &mut Changes) {
+        self.scan(world, true, &|k: &T, v: &T| (k != v).then_some(false), T::clone, out);
     }
 }
 
@@ -129,8 +119,7 @@ pub struct Snapshots {
     swept: Snap<SweptSphere>,
     gcyl: Snap<GeneralizedCylinder>,
     mesh: Snap<usize>,
-    node_op: Snap<Op>,
-    node_children: Snap<Vec<Entity>>,
+    node: Snap<(Op, Vec<Entity>)>,
     material: Snap<[u32; 3]>,
     name: Snap<String>,
     hidden: Snap<()>,
@@ -141,31 +130,31 @@ pub struct Snapshots {
 /// first call reports every entity with a component the bake reads).
 pub fn detect_changes(world: &World, snaps: &mut Snapshots) -> Changes {
     let mut c = Changes::default();
-    // A value change of a shape or transform re-bakes the objects holding it;
-    // adding or removing a shape makes or unmakes a solid.
-    let shape = Kind { presence: true, value: false };
-    let attribute = Kind { presence: false, value: false };
-    let order = Kind { presence: true, value: true };
+    // Attributes: a new value (or one added or removed) re-bakes the objects
+    // holding it. Shapes: adding or removing one makes or unmakes a solid.
+    let value = |same: bool| (!same).then_some(false);
+    let order = |same: bool| (!same).then_some(true);
     let bits = |t: &Transform| t.0.to_cols_array().map(f64::to_bits);
-    snaps.transform.scan(world, attribute, |k, t| *k == bits(t), bits, &mut c);
-    snaps.sphere.scan_copy(world, shape, &mut c);
-    snaps.cuboid.scan_copy(world, shape, &mut c);
-    snaps.cylinder.scan_copy(world, shape, &mut c);
-    snaps.cone.scan_copy(world, shape, &mut c);
-    snaps.torus.scan_copy(world, shape, &mut c);
-    snaps.half_space.scan_copy(world, shape, &mut c);
-    snaps.swept.scan_copy(world, shape, &mut c);
-    snaps.gcyl.scan_copy(world, shape, &mut c);
+    snaps.transform.scan(world, false, &|k: &[u64; 12], t: &Transform| value(*k == bits(t)), bits, &mut c);
+    snaps.sphere.scan_shape(world, &mut c);
+    snaps.cuboid.scan_shape(world, &mut c);
+    snaps.cylinder.scan_shape(world, &mut c);
+    snaps.cone.scan_shape(world, &mut c);
+    snaps.torus.scan_shape(world, &mut c);
+    snaps.half_space.scan_shape(world, &mut c);
+    snaps.swept.scan_shape(world, &mut c);
+    snaps.gcyl.scan_shape(world, &mut c);
     let ptr = |m: &MeshSolid| std::sync::Arc::as_ptr(&m.0) as usize;
-    snaps.mesh.scan(world, shape, |k, m| *k == ptr(m), ptr, &mut c);
+    snaps.mesh.scan(world, true, &|k: &usize, m: &MeshSolid| value(*k == ptr(m)), ptr, &mut c);
     // An op change re-bakes one object; a children change can make or unmake
     // objects (a child is no object of its own).
-    snaps.node_op.scan(world, shape, |k, n: &CsgNode| *k == n.op, |n| n.op, &mut c);
-    snaps.node_children.scan(world, order, |k, n: &CsgNode| *k == n.children, |n| n.children.clone(), &mut c);
+    let node = |n: &CsgNode| (n.op, n.children.clone());
+    let node_diff = |k: &(Op, Vec<Entity>), n: &CsgNode| if k.1 != n.children { Some(true) } else { value(k.0 == n.op) };
+    snaps.node.scan(world, true, &node_diff, node, &mut c);
     let rgb = |m: &Material| m.color.to_array().map(f32::to_bits);
-    snaps.material.scan(world, attribute, |k, m| *k == rgb(m), rgb, &mut c);
-    snaps.name.scan(world, attribute, |k, n: &Name| *k == n.0, |n| n.0.clone(), &mut c);
-    snaps.hidden.scan(world, order, |_, _: &Hidden| true, |_| (), &mut c);
-    snaps.order.scan(world, order, |k, o: &ObjectOrder| *k == o.0, |o| o.0, &mut c);
+    snaps.material.scan(world, false, &|k: &[u32; 3], m: &Material| value(*k == rgb(m)), rgb, &mut c);
+    snaps.name.scan(world, false, &|k: &String, n: &Name| value(*k == n.0), |n| n.0.clone(), &mut c);
+    snaps.hidden.scan(world, true, &|_: &(), _: &Hidden| None, |_| (), &mut c);
+    snaps.order.scan(world, true, &|k: &u32, o: &ObjectOrder| order(*k == o.0), |o| o.0, &mut c);
     c
 }

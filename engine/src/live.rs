@@ -125,11 +125,19 @@ fn bake_all(world: &World, scene: &mut RenderScene, live: &mut LiveState, tolera
 /// Re-bakes the objects that `changes` touch.
 fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, changes: &Changes) -> Result<(), BakeError> {
     let dirty = find_dirty_objects(changes, live);
-    let roots = if changes.structural { find_objects(world) } else { scene.objects.iter().map(|o| o.entity).collect() };
-    let todo: Vec<Entity> = roots.iter().copied().filter(|r| dirty.contains(r) || !live.index.contains_key(r)).collect();
+    // Structural: the objects are listed again (in the fresh bake's order),
+    // the new ones baked; else only the dirty ones, in object order.
+    let roots = if changes.structural { find_objects(world) } else { Vec::new() };
+    let todo: Vec<Entity> = if changes.structural {
+        roots.iter().copied().filter(|r| dirty.contains(r) || !live.index.contains_key(r)).collect()
+    } else {
+        let mut by_index: Vec<(u32, Entity)> = dirty.iter().map(|r| (live.index[r], *r)).collect();
+        by_index.sort_unstable();
+        by_index.into_iter().map(|(_, r)| r).collect()
+    };
     // Many objects, meshes (the packet path's tables are made over the whole
     // scene) or many dead rows: bake everything.
-    let many = todo.len() > FULL_MIN && todo.len() * 2 > roots.len();
+    let many = todo.len() > FULL_MIN && todo.len() * 2 > scene.objects.len();
     let sweep = live.dead_leaves > SWEEP_MIN && live.dead_leaves > scene.leaves.len() - live.dead_leaves;
     if many || sweep || !scene.leaves.meshes.is_empty() {
         return bake_all(world, scene, live, live.tolerance);
@@ -139,13 +147,14 @@ fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, ch
         return bake_all(world, scene, live, live.tolerance);
     }
     live.counts.partial += 1;
-    let moved = place_objects(world, scene, live, &baked, &roots);
     if changes.structural {
+        place_objects(world, scene, live, &baked, &roots);
         live.counts.rebuilds += 1;
         build_object_trees(scene, ObjectTrees::Live);
         link_object_trees(scene, live);
         scene.redo_window = scene.objects.iter().map(|o| redo_window_of(&scene.program, &scene.leaves, o)).collect();
     } else {
+        let moved = replace_objects(world, scene, live, &baked);
         refit_object_trees(scene, live, &moved);
     }
     update_scene_bounds(scene);
@@ -167,14 +176,47 @@ fn find_dirty_objects(changes: &Changes, live: &LiveState) -> HashSet<Entity> {
     dirty
 }
 
-/// Puts the re-baked objects of `baked` (in `roots` order) into the scene's
-/// tables and lays the objects out in `roots` order; returns the objects whose
-/// bounds changed (old bounds with them).
-fn place_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState, baked: &Baked, roots: &[Entity]) -> Vec<(u32, Aabb)> {
+/// Puts object `k` of `baked` into the scene's tables as object `oi` (over
+/// or instead of the rows of `old`); returns its info and rows.
+fn rebake_object(world: &World, scene: &mut RenderScene, live: &mut LiveState, baked: &Baked, k: usize, oi: u32, old: Option<Slice>) -> (ObjectInfo, Slice) {
+    let root = baked.objects[k].entity;
+    if let Some(s) = old {
+        forget_members(live, root, s);
+    }
+    let slice = place_object(scene, live, baked, k, old);
+    own_members(live, root, slice);
+    let b = &baked.objects[k];
+    let root_node = b.root - baked.slices[k].nodes[0] + slice.nodes[0];
+    for l in &mut scene.leaf_info[slice.leaves[0] as usize..slice.leaves[1] as usize] {
+        l.object = oi;
+    }
+    (ObjectInfo { entity: root, name: object_name(world, root, oi), root: root_node, bounds: b.bounds }, slice)
+}
+
+/// Puts the re-baked objects of `baked` over the old ones (same set, same
+/// order); returns the objects whose bounds changed, with their old bounds.
+fn replace_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState, baked: &Baked) -> Vec<(u32, Aabb)> {
+    let mut moved = Vec::new();
+    for k in 0..baked.objects.len() {
+        let oi = live.index[&baked.objects[k].entity];
+        let old = live.slices[oi as usize];
+        let (info, slice) = rebake_object(world, scene, live, baked, k, oi, Some(old));
+        let old_bounds = std::mem::replace(&mut scene.objects[oi as usize], info).bounds;
+        if !same_box(&old_bounds, &scene.objects[oi as usize].bounds) {
+            moved.push((oi, old_bounds));
+        }
+        live.slices[oi as usize] = slice;
+    }
+    moved
+}
+
+/// Lays the objects out in `roots` order: the re-baked ones of `baked` (in
+/// `roots` order) into the scene's tables, the others where they were; the
+/// rows of objects that are gone die.
+fn place_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState, baked: &Baked, roots: &[Entity]) {
     let mut old_objects = std::mem::take(&mut scene.objects);
     let old_slices = std::mem::take(&mut live.slices);
     let mut kept = vec![false; old_objects.len()];
-    let mut moved = Vec::new();
     let mut next = 0usize; // next object of `baked`
     for (oi, &root) in roots.iter().enumerate() {
         let oi = oi as u32;
@@ -182,36 +224,19 @@ fn place_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState, b
         if let Some(i) = old {
             kept[i] = true;
         }
-        let rebaked = baked.objects.get(next).is_some_and(|o| o.entity == root);
-        let (info, slice) = if rebaked {
-            let k = next;
+        let (info, slice) = if baked.objects.get(next).is_some_and(|o| o.entity == root) {
             next += 1;
-            let old_slice = old.map(|i| old_slices[i]);
-            if let Some(s) = old_slice {
-                forget_members(live, root, s);
-            }
-            let slice = place_object(scene, live, baked, k, old_slice);
-            own_members(live, root, slice);
-            let b = &baked.objects[k];
-            let root_node = b.root - baked.slices[k].nodes[0] + slice.nodes[0];
-            let info = ObjectInfo { entity: root, name: object_name(world, root, oi), root: root_node, bounds: b.bounds };
-            let old_bounds = old.map_or(Aabb::EMPTY, |i| old_objects[i].bounds);
-            if !same_box(&old_bounds, &info.bounds) {
-                moved.push((oi, old_bounds));
-            }
-            (info, slice)
+            rebake_object(world, scene, live, baked, next - 1, oi, old.map(|i| old_slices[i]))
         } else {
             let i = old.expect("an object not re-baked was baked before");
-            let mut info = std::mem::replace(&mut old_objects[i].name, String::new());
-            if i as u32 != oi {
-                info = object_name(world, root, oi);
+            let o = &mut old_objects[i];
+            let name = if i as u32 == oi { std::mem::take(&mut o.name) } else { object_name(world, root, oi) };
+            let slice = old_slices[i];
+            for l in &mut scene.leaf_info[slice.leaves[0] as usize..slice.leaves[1] as usize] {
+                l.object = oi;
             }
-            let o = &old_objects[i];
-            (ObjectInfo { entity: root, name: info, root: o.root, bounds: o.bounds }, old_slices[i])
+            (ObjectInfo { entity: root, name, root: o.root, bounds: o.bounds }, slice)
         };
-        for l in &mut scene.leaf_info[slice.leaves[0] as usize..slice.leaves[1] as usize] {
-            l.object = oi;
-        }
         scene.objects.push(info);
         live.slices.push(slice);
     }
@@ -221,14 +246,7 @@ fn place_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState, b
             release_rows(scene, live, old_slices[i]);
         }
     }
-    if roots.len() != old_slices.len() || kept.iter().any(|k| !k) || live.index.len() != roots.len() {
-        live.index = roots.iter().enumerate().map(|(i, &r)| (r, i as u32)).collect();
-    } else {
-        for (i, &r) in roots.iter().enumerate() {
-            live.index.insert(r, i as u32);
-        }
-    }
-    moved
+    live.index = roots.iter().enumerate().map(|(i, &r)| (r, i as u32)).collect();
 }
 
 fn same_box(a: &Aabb, b: &Aabb) -> bool {

@@ -1,0 +1,204 @@
+//! A live scene: N objects (each a box minus a sphere) in the tool's own
+//! `hecs::World`, some moving every frame; each frame syncs the baked scene
+//! and picks once. Prints medians of the sync and pick times.
+//!
+//! ```text
+//! cargo run --release --example live                       # 10 000 objects, 100 moving, 100 frames
+//! cargo run --release --example live -- --objects 100000 --moving 1
+//! cargo run --release --example live -- --frames 1000      # and the trace speed after them
+//! cargo run --release --example live -- --union 1000000    # memory: one union of N spheres
+//! ```
+
+use std::time::Instant;
+
+use glam::{DAffine3, DVec3, Vec3};
+use hecs::{Entity, World};
+use rand::{rngs::SmallRng, Rng, SeedableRng};
+use rothray::engine::*;
+
+struct Args {
+    objects: usize,
+    moving: usize,
+    frames: usize,
+    union: usize,
+}
+
+fn parse_args() -> Args {
+    let mut a = Args { objects: 10_000, moving: 100, frames: 100, union: 0 };
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    for pair in argv.chunks(2) {
+        let v = pair.get(1).and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{}: a number please", pair[0]));
+        match pair[0].as_str() {
+            "--objects" => a.objects = v,
+            "--moving" => a.moving = v,
+            "--frames" => a.frames = v,
+            "--union" => a.union = v,
+            o => panic!("unknown option {o}"),
+        }
+    }
+    a
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// `VmHWM` (peak) and `VmRSS` of this process in bytes (Linux).
+fn rss() -> (u64, u64) {
+    let s = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |name: &str| {
+        s.lines().find(|l| l.starts_with(name)).and_then(|l| l.split_whitespace().nth(1)).and_then(|k| k.parse::<u64>().ok()).unwrap_or(0)
+            * 1024
+    };
+    (field("VmHWM:"), field("VmRSS:"))
+}
+
+/// Side of the cube the objects fill (about 3 units apart).
+fn extent(n: usize) -> f32 {
+    3.0 * (n as f32).cbrt()
+}
+
+fn spawn_objects(world: &mut World, n: usize, rng: &mut SmallRng) -> Vec<Entity> {
+    let side = extent(n);
+    (0..n)
+        .map(|_| {
+            let p = Vec3::new(rng.gen_range(0.0..side), rng.gen_range(0.0..side), rng.gen_range(0.0..side));
+            let b = world.spawn((Cuboid { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) },));
+            let s = world.spawn((Transform::from_translation(Vec3::new(0.0, 0.0, 0.8)), Sphere { center: Vec3::ZERO, radius: 1.2 }));
+            world.spawn((CsgNode::difference([b, s]), Transform::from_translation(p)))
+        })
+        .collect()
+}
+
+/// Moves `k` random objects by up to half a unit.
+fn move_some(world: &mut World, roots: &[Entity], k: usize, rng: &mut SmallRng) {
+    for _ in 0..k {
+        let r = roots[rng.gen_range(0..roots.len())];
+        let mut t = world.get::<&mut Transform>(r).unwrap();
+        let d = DVec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5));
+        t.0 = DAffine3::from_translation(d) * t.0;
+    }
+}
+
+/// A pick: the ray from a corner of the scene through a random object.
+fn pick_ray(scene: &RenderScene, rng: &mut SmallRng) -> Ray {
+    let o = scene.bounds.max + Vec3::splat(5.0);
+    let target = scene.objects[rng.gen_range(0..scene.objects.len())].bounds.center();
+    Ray::new(o, target - o)
+}
+
+fn live(a: &Args) {
+    let mut rng = SmallRng::seed_from_u64(13);
+    let mut world = World::new();
+    let roots = spawn_objects(&mut world, a.objects, &mut rng);
+    let mut scene = RenderScene::default();
+    let t = Instant::now();
+    sync_scene(&mut world, &mut scene).unwrap();
+    println!("{} objects, first sync {:.1} ms", a.objects, ms(t));
+    let t = Instant::now();
+    let fresh = RenderScene::from_world(&world).unwrap();
+    println!("full bake (bake_scene, obvhs CwBvh over the objects): {:.1} ms", ms(t));
+    drop(fresh);
+
+    let (mut idle, mut one) = (Vec::new(), Vec::new());
+    for _ in 0..a.frames.max(1) {
+        let t = Instant::now();
+        assert!(!sync_scene(&mut world, &mut scene).unwrap());
+        idle.push(ms(t));
+        move_some(&mut world, &roots, 1, &mut rng);
+        let t = Instant::now();
+        sync_scene(&mut world, &mut scene).unwrap();
+        let hit = scene.intersect(&pick_ray(&scene, &mut rng));
+        one.push(ms(t));
+        std::hint::black_box(hit);
+    }
+    println!("sync with nothing changed: median {:.3} ms", median(&mut idle));
+    println!("move 1, sync, pick: median {:.3} ms", median(&mut one));
+
+    let (mut sync, mut pick) = (Vec::new(), Vec::new());
+    let mut hits = 0;
+    for _ in 0..a.frames {
+        move_some(&mut world, &roots, a.moving, &mut rng);
+        let t = Instant::now();
+        sync_scene(&mut world, &mut scene).unwrap();
+        sync.push(ms(t));
+        let ray = pick_ray(&scene, &mut rng);
+        let t = Instant::now();
+        let hit = scene.intersect(&ray);
+        pick.push(ms(t));
+        hits += hit.is_some() as usize;
+    }
+    if a.frames > 0 {
+        println!("move {}, sync: median {:.3} ms; pick: median {:.4} ms ({hits} of {} picks hit)", a.moving, median(&mut sync), median(&mut pick), a.frames);
+    }
+
+    move_some(&mut world, &roots, a.objects, &mut rng);
+    let t = Instant::now();
+    sync_scene(&mut world, &mut scene).unwrap();
+    println!("move all {}, sync: {:.1} ms", a.objects, ms(t));
+
+    trace_speed(&world, &scene, &mut rng);
+    let (peak, now) = rss();
+    println!("peak RSS {:.1} MB, RSS {:.1} MB", peak as f64 / 1e6, now as f64 / 1e6);
+}
+
+/// Traces the same rays through the live scene and a fresh bake of the same
+/// world (the refit trees against new ones).
+fn trace_speed(world: &World, scene: &RenderScene, rng: &mut SmallRng) {
+    let fresh = RenderScene::from_world(world).unwrap();
+    let rays: Vec<Ray> = (0..20_000).map(|_| pick_ray(&fresh, rng)).collect();
+    let time = |s: &RenderScene| {
+        let t = Instant::now();
+        let n = rays.iter().filter(|r| s.intersect(r).is_some()).count();
+        (ms(t), n)
+    };
+    let (tl, nl) = time(scene);
+    let (tf, nf) = time(&fresh);
+    assert_eq!(nl, nf, "the live scene and a fresh bake hit as often");
+    println!("20 000 picks: live scene {tl:.1} ms, fresh bake {tf:.1} ms ({:.2}x)", tl / tf);
+}
+
+/// Memory: one union of `n` spheres, baked once.
+fn union(n: usize) {
+    let mut rng = SmallRng::seed_from_u64(13);
+    let mut world = World::new();
+    let side = extent(n);
+    let kids: Vec<Entity> = (0..n)
+        .map(|_| {
+            let c = Vec3::new(rng.gen_range(0.0..side), rng.gen_range(0.0..side), rng.gen_range(0.0..side));
+            world.spawn((Sphere { center: c, radius: 1.0 },))
+        })
+        .collect();
+    world.spawn((CsgNode::union(kids),));
+    let (_, before) = rss();
+    let mut scene = RenderScene::default();
+    let t = Instant::now();
+    sync_scene(&mut world, &mut scene).unwrap();
+    let bake = ms(t);
+    let (peak, after) = rss();
+    println!(
+        "union of {n} spheres: sync {bake:.0} ms; RSS {:.0} MB before the sync, {:.0} MB after, peak {:.0} MB",
+        before as f64 / 1e6,
+        after as f64 / 1e6,
+        peak as f64 / 1e6
+    );
+    println!(
+        "per leaf: {:.0} bytes kept by the scene and its sync state, {:.0} bytes at the peak",
+        (after - before) as f64 / n as f64,
+        (peak - before) as f64 / n as f64
+    );
+}
+
+fn main() {
+    let a = parse_args();
+    if a.union > 0 {
+        union(a.union);
+    } else {
+        live(&a);
+    }
+}
