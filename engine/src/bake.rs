@@ -204,7 +204,17 @@ pub fn fingerprint_world(world: &World) -> u64 {
 /// whose inputs changed since the last call (returns whether anything was
 /// baked). The first call bakes everything; see [`crate::live`].
 pub fn sync_scene(world: &mut World, scene: &mut RenderScene) -> Result<bool, BakeError> {
-    crate::live::sync_live(world, scene)
+    crate::live::sync_live(world, crate::changes::Scope::All, scene)
+}
+
+/// System: [`sync_scene`] for a tool that knows what it touched: `touched`
+/// lists every entity it spawned, despawned, or on which it added, changed
+/// or removed a rothray component since the last sync. Only those are
+/// compared with the last sync's copies, so the cost follows the changes,
+/// not the scene (an entity left out of the list is seen at the next
+/// [`sync_scene`]). The first sync of a scene looks at every entity.
+pub fn sync_scene_touched(world: &mut World, scene: &mut RenderScene, touched: &[Entity]) -> Result<bool, BakeError> {
+    crate::live::sync_live(world, crate::changes::Scope::Some(touched), scene)
 }
 
 /// Where one object's rows sit in the baked tables (half-open ranges).

@@ -34,21 +34,50 @@ pub struct Changes {
 /// entities in the same order and a scan is one sequential pass over both.
 struct Snap<K> {
     items: Vec<(Entity, K)>,
+    /// Per entity id, its position in `items` (`NONE`: none); made on the
+    /// first scan of a [`Scope::Some`] (4 bytes per entity id and type).
+    pos: Vec<u32>,
 }
+
+const NONE: u32 = u32::MAX;
 
 impl<K> Default for Snap<K> {
     fn default() -> Self {
-        Snap { items: Vec::new() }
+        Snap { items: Vec::new(), pos: Vec::new() }
     }
 }
 
+/// Which entities a scan looks at.
+#[derive(Clone, Copy)]
+pub enum Scope<'a> {
+    /// Every entity (a pass over each type's query).
+    All,
+    /// Only these (the tool lists what it spawned, despawned or changed).
+    Some(&'a [Entity]),
+}
+
 impl<K> Snap<K> {
+    /// [`Snap::scan_all`] or [`Snap::scan_some`].
+    fn scan<T: Component>(
+        &mut self,
+        (world, scope): (&World, Scope),
+        presence: bool,
+        compare: impl Fn(&K, &T) -> Option<bool>,
+        key: impl Fn(&T) -> K,
+        out: &mut Changes,
+    ) {
+        match scope {
+            Scope::All => self.scan_all(world, presence, compare, key, out),
+            Scope::Some(list) => self.scan_some(world, list, (presence, compare), key, out),
+        }
+    }
+
     /// Compares every `T` of `world` with the copy (`compare`: `None` when
     /// the same, else whether the change is structural) and brings the copy
     /// up to date (`key`, called only for what changed); records the
     /// entities whose `T` was added, changed or removed. `presence`: adding or
     /// removing a `T` is structural.
-    fn scan<T: Component>(&mut self, world: &World, presence: bool, compare: impl Fn(&K, &T) -> Option<bool>, key: impl Fn(&T) -> K, out: &mut Changes) {
+    fn scan_all<T: Component>(&mut self, world: &World, presence: bool, compare: impl Fn(&K, &T) -> Option<bool>, key: impl Fn(&T) -> K, out: &mut Changes) {
         let mut q = world.query::<&T>();
         let mut it = q.iter();
         let mut i = 0;
@@ -87,13 +116,95 @@ impl<K> Snap<K> {
                         out.dirty.push(e);
                         out.structural |= presence;
                     }
+                    self.reindex();
                     return;
                 }
             }
         }
-        for (e, _) in self.items.drain(i..) {
-            out.dirty.push(e);
-            out.structural |= presence;
+        if i < self.items.len() {
+            for (e, _) in self.items.drain(i..) {
+                out.dirty.push(e);
+                out.structural |= presence;
+            }
+            self.reindex();
+        }
+    }
+
+    /// Remakes `pos` (when in use) after `items` moved.
+    fn reindex(&mut self) {
+        if self.pos.is_empty() {
+            return;
+        }
+        self.pos.iter_mut().for_each(|p| *p = NONE);
+        for (i, (e, _)) in self.items.iter().enumerate() {
+            let id = e.id() as usize;
+            if id >= self.pos.len() {
+                self.pos.resize(id + 1, NONE);
+            }
+            self.pos[id] = i as u32;
+        }
+    }
+
+    /// [`Snap::scan_all`] over the entities of `list` only: a lookup per
+    /// entity. The copy's order then no longer follows the query's (the
+    /// next [`Snap::scan_all`] matches by entity once).
+    fn scan_some<T: Component>(
+        &mut self,
+        world: &World,
+        list: &[Entity],
+        (presence, compare): (bool, impl Fn(&K, &T) -> Option<bool>),
+        key: impl Fn(&T) -> K,
+        out: &mut Changes,
+    ) {
+        if self.pos.is_empty() && !self.items.is_empty() {
+            self.pos.push(NONE);
+            self.reindex();
+        }
+        for &e in list {
+            let id = e.id() as usize;
+            let at = self.pos.get(id).copied().filter(|&p| p != NONE);
+            if let Some(p) = at.filter(|&p| self.items[p as usize].0 != e) {
+                // The id was reused: the entity that held it is gone.
+                out.dirty.push(self.items[p as usize].0);
+                self.remove_at(p as usize);
+                out.structural |= presence;
+            }
+            let at = self.pos.get(id).copied().filter(|&p| p != NONE);
+            let cur = world.get::<&T>(e).ok();
+            match (at, cur) {
+                (Some(p), Some(v)) => {
+                    let (_, k) = &mut self.items[p as usize];
+                    if let Some(structural) = compare(k, &v) {
+                        *k = key(&v);
+                        out.dirty.push(e);
+                        out.structural |= structural;
+                    }
+                }
+                (Some(p), None) => {
+                    self.remove_at(p as usize);
+                    out.dirty.push(e);
+                    out.structural |= presence;
+                }
+                (None, Some(v)) => {
+                    if id >= self.pos.len() {
+                        self.pos.resize(id + 1, NONE);
+                    }
+                    self.pos[id] = self.items.len() as u32;
+                    self.items.push((e, key(&v)));
+                    out.dirty.push(e);
+                    out.structural |= presence;
+                }
+                (None, None) => {}
+            }
+        }
+    }
+
+    /// Removes item `p` (the last one takes its place).
+    fn remove_at(&mut self, p: usize) {
+        let (e, _) = self.items.swap_remove(p);
+        self.pos[e.id() as usize] = NONE;
+        if let Some((m, _)) = self.items.get(p) {
+            self.pos[m.id() as usize] = p as u32;
         }
     }
 }
@@ -101,7 +212,7 @@ impl<K> Snap<K> {
 impl<T: Component + Clone + PartialEq> Snap<T> {
     /// [`Snap::scan`] for a shape: compared by `PartialEq` with a copy of
     /// itself; a new value re-bakes the objects holding it.
-    fn scan_shape(&mut self, world: &World, out: &mut Changes) {
+    fn scan_shape(&mut self, world: (&World, Scope), out: &mut Changes) {
         self.scan(world, true, &|k: &T, v: &T| (k != v).then_some(false), T::clone, out);
     }
 }
@@ -126,10 +237,12 @@ pub struct Snapshots {
     order: Snap<u32>,
 }
 
-/// System: the entities whose bake input changed since the last call (the
-/// first call reports every entity with a component the bake reads).
-pub fn detect_changes(world: &World, snaps: &mut Snapshots) -> Changes {
+/// System: the entities (of `scope`) whose bake input changed since the last
+/// call (the first call reports every entity with a component the bake
+/// reads).
+pub fn detect_changes(world: &World, scope: Scope, snaps: &mut Snapshots) -> Changes {
     let mut c = Changes::default();
+    let world = (world, scope);
     // Attributes: a new value (or one added or removed) re-bakes the objects
     // holding it. Shapes: adding or removing one makes or unmakes a solid.
     let value = |same: bool| (!same).then_some(false);

@@ -40,7 +40,7 @@ mod render_tile;
 pub mod scene;
 pub mod tile;
 
-pub use bake::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError};
+pub use bake::{bake_scene, find_objects, fingerprint_world, sync_scene, sync_scene_touched, BakeError};
 pub use components::*;
 pub use glam;
 pub use hecs;

@@ -27,7 +27,7 @@ use crate::bake::{
     bake_objects, build_object_trees, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, Baked,
     ObjectTrees, Slice,
 };
-use crate::changes::{detect_changes, Changes, Snapshots};
+use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;
 use crate::refit::Refit;
 use crate::scene::{ObjectInfo, RenderScene};
@@ -82,11 +82,11 @@ const SWEEP_MIN: usize = if cfg!(test) { 64 } else { 4096 };
 const FULL_MIN: usize = 256;
 
 /// The sync: see the module documentation.
-pub(crate) fn sync_live(world: &World, scene: &mut RenderScene) -> Result<bool, BakeError> {
+pub(crate) fn sync_live(world: &World, scope: Scope, scene: &mut RenderScene) -> Result<bool, BakeError> {
     let tolerance = scene.tolerance_or_default();
     let full = scene.live.as_ref().is_none_or(|l| l.tolerance != tolerance);
     let mut live = scene.live.take().unwrap_or_default();
-    let changes = detect_changes(world, &mut live.snaps);
+    let changes = detect_changes(world, if full { Scope::All } else { scope }, &mut live.snaps);
     let result = if full {
         bake_all(world, scene, &mut live, tolerance).map(|_| true)
     } else if changes.dirty.is_empty() {

@@ -93,11 +93,12 @@ fn spawn_object(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> 
     root
 }
 
-fn despawn_tree(world: &mut World, e: Entity) {
+fn despawn_tree(world: &mut World, e: Entity, touched: &mut Vec<Entity>) {
     let kids = world.get::<&CsgNode>(e).map(|n| n.children.clone()).unwrap_or_default();
     for c in kids {
-        despawn_tree(world, c);
+        despawn_tree(world, c, touched);
     }
+    touched.push(e);
     let _ = world.despawn(e);
 }
 
@@ -110,17 +111,19 @@ fn is_leaf(world: &World, e: Entity) -> bool {
     world.get::<&CsgNode>(e).is_err()
 }
 
-/// One random edit; returns its name.
-fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static str {
+/// One random edit, listing the entities it touched; returns its name.
+fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>, touched: &mut Vec<Entity>) -> &'static str {
     match rng.gen_range(0..16) {
         0 | 1 => {
+            let before: std::collections::HashSet<Entity> = world.iter().map(|e| e.entity()).collect();
             spawn_object(world, rng, mesh);
+            touched.extend(world.iter().map(|e| e.entity()).filter(|e| !before.contains(e)));
             "spawn"
         }
         2 => {
             let roots = find_objects(world);
             if !roots.is_empty() {
-                despawn_tree(world, roots[rng.gen_range(0..roots.len())]);
+                despawn_tree(world, roots[rng.gen_range(0..roots.len())], touched);
             }
             "despawn"
         }
@@ -128,6 +131,7 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static
             if let Some(e) = pick::<Transform>(world, rng) {
                 let t = Transform::from_translation(v3(rng, 6.0));
                 world.insert_one(e, t).unwrap();
+                touched.push(e);
             }
             "move"
         }
@@ -135,12 +139,14 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static
             if let Some(e) = pick::<Transform>(world, rng).filter(|&e| is_leaf(world, e)) {
                 remove_shape(world, e);
                 insert_shape(world, rng, e);
+                touched.push(e);
             }
             "reshape"
         }
         6 => {
             if let Some(e) = pick::<Sphere>(world, rng) {
                 world.get::<&mut Sphere>(e).unwrap().radius = rng.gen_range(0.2..1.5);
+                touched.push(e);
             }
             "radius"
         }
@@ -152,22 +158,27 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static
             if a != b && kids.len() > 1 && !leaves.is_empty() {
                 let c = world.get::<&mut CsgNode>(a).unwrap().children.remove(leaves[rng.gen_range(0..leaves.len())]);
                 world.get::<&mut CsgNode>(b).unwrap().children.push(c);
+                touched.extend([a, b]);
             }
             "reparent"
         }
         8 => {
             if let Some(e) = pick::<CsgNode>(world, rng) {
                 world.get::<&mut CsgNode>(e).unwrap().op = random_op(rng);
+                touched.push(e);
             }
             "op"
         }
         9 => {
             if let Some(e) = pick::<Hidden>(world, rng).filter(|_| rng.gen_bool(0.5)) {
                 world.remove_one::<Hidden>(e).unwrap();
+                touched.push(e);
             } else {
                 let roots = find_objects(world);
                 if !roots.is_empty() {
-                    world.insert_one(roots[rng.gen_range(0..roots.len())], Hidden).unwrap();
+                    let r = roots[rng.gen_range(0..roots.len())];
+                    world.insert_one(r, Hidden).unwrap();
+                    touched.push(r);
                 }
             }
             "hide"
@@ -175,6 +186,7 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static
         10 => {
             if let Some(e) = pick::<Transform>(world, rng) {
                 world.insert_one(e, Material { color: v3(rng, 1.0).abs() }).unwrap();
+                touched.push(e);
             }
             "material"
         }
@@ -182,6 +194,7 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static
             if let Some(e) = pick::<MeshSolid>(world, rng) {
                 world.remove_one::<MeshSolid>(e).unwrap();
                 world.insert_one(e, Sphere { center: Vec3::ZERO, radius: 0.7 }).unwrap();
+                touched.push(e);
             }
             "remove mesh"
         }
@@ -189,6 +202,7 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static
             if let Some(e) = pick::<Transform>(world, rng).filter(|&e| is_leaf(world, e) && rng.gen_bool(0.3)) {
                 remove_shape(world, e);
                 world.insert_one(e, MeshSolid(mesh.clone())).unwrap();
+                touched.push(e);
             }
             "add mesh"
         }
@@ -199,6 +213,7 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> &'static
                 } else {
                     world.insert_one(e, ObjectOrder(rng.gen_range(0..5))).unwrap();
                 }
+                touched.push(e);
             }
             "rename"
         }
@@ -274,12 +289,20 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
         }
         let mut scene = RenderScene::default();
         let mut log = Vec::new();
+        // Odd worlds sync with the list of touched entities (now and then
+        // with a full scan in between).
+        let listed = world_no % 2 == 1;
         for step in 0..150 {
+            let mut touched = Vec::new();
             for _ in 0..rng.gen_range(1..4) {
-                log.push(edit(&mut world, &mut rng, &mesh));
+                log.push(edit(&mut world, &mut rng, &mesh, &mut touched));
             }
             let what = format!("seed {seed} world {world_no} step {step} after {:?}", &log[log.len().saturating_sub(3)..]);
-            let got = sync_scene(&mut world, &mut scene);
+            let got = if listed && rng.gen_bool(0.9) {
+                sync_scene_touched(&mut world, &mut scene, &touched)
+            } else {
+                sync_scene(&mut world, &mut scene)
+            };
             match RenderScene::from_world(&world) {
                 Ok(fresh) => {
                     assert!(got.is_ok(), "{what}: live sync failed ({got:?}) where a fresh bake works");
