@@ -75,14 +75,15 @@ fn spawn_objects(world: &mut World, n: usize, rng: &mut SmallRng) -> Vec<Entity>
         .collect()
 }
 
-/// Moves `k` random objects by up to half a unit.
-fn move_some(world: &mut World, roots: &[Entity], k: usize, rng: &mut SmallRng) {
-    for _ in 0..k {
-        let r = roots[rng.gen_range(0..roots.len())];
+/// Moves `k` random objects by up to half a unit; returns them.
+fn move_some(world: &mut World, roots: &[Entity], k: usize, rng: &mut SmallRng) -> Vec<Entity> {
+    let moved: Vec<Entity> = (0..k).map(|_| roots[rng.gen_range(0..roots.len())]).collect();
+    for &r in &moved {
         let mut t = world.get::<&mut Transform>(r).unwrap();
         let d = DVec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5));
         t.0 = DAffine3::from_translation(d) * t.0;
     }
+    moved
 }
 
 /// A pick: the ray from a corner of the scene through a random object.
@@ -105,62 +106,84 @@ fn live(a: &Args) {
     println!("full bake (bake_scene, obvhs CwBvh over the objects): {:.1} ms", ms(t));
     drop(fresh);
 
-    let (mut idle, mut one) = (Vec::new(), Vec::new());
-    for _ in 0..a.frames.max(1) {
-        let t = Instant::now();
-        assert!(!sync_scene(&mut world, &mut scene).unwrap());
-        idle.push(ms(t));
-        move_some(&mut world, &roots, 1, &mut rng);
-        let t = Instant::now();
-        sync_scene(&mut world, &mut scene).unwrap();
-        let hit = scene.intersect(&pick_ray(&scene, &mut rng));
-        one.push(ms(t));
-        std::hint::black_box(hit);
-    }
-    println!("sync with nothing changed: median {:.3} ms", median(&mut idle));
-    println!("move 1, sync, pick: median {:.3} ms", median(&mut one));
+    // Each case twice: `sync_scene` (compares every entity with the last
+    // sync's copy) and `sync_scene_touched` (only the entities listed).
+    for listed in [false, true] {
+        let how = if listed { "sync_scene_touched" } else { "sync_scene" };
+        let sync = |world: &mut World, scene: &mut RenderScene, touched: &[Entity]| {
+            if listed {
+                sync_scene_touched(world, scene, touched).unwrap()
+            } else {
+                sync_scene(world, scene).unwrap()
+            }
+        };
+        let (mut idle, mut one) = (Vec::new(), Vec::new());
+        for _ in 0..a.frames.max(1) {
+            let t = Instant::now();
+            assert!(!sync(&mut world, &mut scene, &[]));
+            idle.push(ms(t));
+            let moved = move_some(&mut world, &roots, 1, &mut rng);
+            let t = Instant::now();
+            sync(&mut world, &mut scene, &moved);
+            let hit = scene.intersect(&pick_ray(&scene, &mut rng));
+            one.push(ms(t));
+            std::hint::black_box(hit);
+        }
+        println!("{how}: nothing changed: median {:.3} ms", median(&mut idle));
+        println!("{how}: move 1, sync, pick: median {:.3} ms", median(&mut one));
 
-    let (mut sync, mut pick) = (Vec::new(), Vec::new());
-    let mut hits = 0;
-    for _ in 0..a.frames {
-        move_some(&mut world, &roots, a.moving, &mut rng);
-        let t = Instant::now();
-        sync_scene(&mut world, &mut scene).unwrap();
-        sync.push(ms(t));
-        let ray = pick_ray(&scene, &mut rng);
-        let t = Instant::now();
-        let hit = scene.intersect(&ray);
-        pick.push(ms(t));
-        hits += hit.is_some() as usize;
+        let (mut synced, mut pick) = (Vec::new(), Vec::new());
+        let mut hits = 0;
+        for _ in 0..a.frames {
+            let moved = move_some(&mut world, &roots, a.moving, &mut rng);
+            let t = Instant::now();
+            sync(&mut world, &mut scene, &moved);
+            synced.push(ms(t));
+            let ray = pick_ray(&scene, &mut rng);
+            let t = Instant::now();
+            let hit = scene.intersect(&ray);
+            pick.push(ms(t));
+            hits += hit.is_some() as usize;
+        }
+        if a.frames > 0 {
+            let (s, p) = (median(&mut synced), median(&mut pick));
+            println!("{how}: move {}, sync: median {s:.3} ms; pick: median {p:.4} ms ({hits} of {} picks hit)", a.moving, a.frames);
+        }
     }
-    if a.frames > 0 {
-        println!("move {}, sync: median {:.3} ms; pick: median {:.4} ms ({hits} of {} picks hit)", a.moving, median(&mut sync), median(&mut pick), a.frames);
-    }
+    // After all those frames of refits: the live trees against fresh ones.
+    trace_speed(&mut world, &scene, &mut rng);
 
     move_some(&mut world, &roots, a.objects, &mut rng);
     let t = Instant::now();
     sync_scene(&mut world, &mut scene).unwrap();
     println!("move all {}, sync: {:.1} ms", a.objects, ms(t));
-
-    trace_speed(&world, &scene, &mut rng);
     let (peak, now) = rss();
     println!("peak RSS {:.1} MB, RSS {:.1} MB", peak as f64 / 1e6, now as f64 / 1e6);
 }
 
-/// Traces the same rays through the live scene and a fresh bake of the same
-/// world (the refit trees against new ones).
-fn trace_speed(world: &World, scene: &RenderScene, rng: &mut SmallRng) {
+/// Traces the same rays through the live scene, a fresh live scene of the
+/// same world (new binary trees) and a fresh bake (`bake_scene`: obvhs'
+/// `CwBvh` over the objects).
+fn trace_speed(world: &mut World, scene: &RenderScene, rng: &mut SmallRng) {
     let fresh = RenderScene::from_world(world).unwrap();
+    let mut relive = RenderScene::default();
+    sync_scene(world, &mut relive).unwrap();
     let rays: Vec<Ray> = (0..20_000).map(|_| pick_ray(&fresh, rng)).collect();
     let time = |s: &RenderScene| {
-        let t = Instant::now();
-        let n = rays.iter().filter(|r| s.intersect(r).is_some()).count();
-        (ms(t), n)
+        let mut best = f64::INFINITY;
+        let mut n = 0;
+        for _ in 0..3 {
+            let t = Instant::now();
+            n = rays.iter().filter(|r| s.intersect(r).is_some()).count();
+            best = best.min(ms(t));
+        }
+        (best, n)
     };
     let (tl, nl) = time(scene);
+    let (tr, nr) = time(&relive);
     let (tf, nf) = time(&fresh);
-    assert_eq!(nl, nf, "the live scene and a fresh bake hit as often");
-    println!("20 000 picks: live scene {tl:.1} ms, fresh bake {tf:.1} ms ({:.2}x)", tl / tf);
+    assert!(nl == nf && nr == nf, "the live scenes and a fresh bake hit as often");
+    println!("20 000 picks (best of 3): live scene {tl:.1} ms, fresh live scene {tr:.1} ms, fresh bake {tf:.1} ms ({:.2}x, {:.2}x)", tl / tr, tl / tf);
 }
 
 /// Memory: one union of `n` spheres, baked once.

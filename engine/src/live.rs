@@ -34,7 +34,7 @@ use crate::scene::{ObjectInfo, RenderScene};
 
 /// The object trees are rebuilt once refits have made their summed node
 /// area this many times that of the fresh build.
-pub const REBUILD_AT: f64 = 1.5;
+pub const REBUILD_AT: f64 = 1.2;
 
 /// What a live scene keeps between syncs.
 #[derive(Default)]
