@@ -11,6 +11,7 @@ use rothray_primitives::{bvh::FlatBvh, gcyl::GenCylData, sweep::SweptSphereData,
 use std::sync::Arc;
 
 use crate::components::*;
+use crate::entity_hash::EntitySet;
 use crate::packet::bake_packet_paths;
 use crate::scene::{LeafInfo, ObjectInfo, RenderScene};
 
@@ -88,13 +89,6 @@ fn leaf_desc(world: &World, e: Entity) -> Option<LeafDesc> {
     None
 }
 
-fn is_leaf(world: &World, e: Entity) -> bool {
-    leaf_shape(world, e).is_some()
-        || world.get::<&SweptSphere>(e).is_ok()
-        || world.get::<&GeneralizedCylinder>(e).is_ok()
-        || world.get::<&MeshSolid>(e).is_ok()
-}
-
 fn leaf_shape(world: &World, e: Entity) -> Option<LeafShape> {
     let er = world.entity(e).ok()?;
     if let Some(s) = er.get::<&Sphere>() {
@@ -119,7 +113,18 @@ fn leaf_shape(world: &World, e: Entity) -> Option<LeafShape> {
 }
 
 fn is_solid(world: &World, e: Entity) -> bool {
-    world.get::<&CsgNode>(e).is_ok() || is_leaf(world, e)
+    world.entity(e).is_ok_and(|er| {
+        er.has::<CsgNode>()
+            || er.has::<Sphere>()
+            || er.has::<Cuboid>()
+            || er.has::<Cylinder>()
+            || er.has::<Cone>()
+            || er.has::<Torus>()
+            || er.has::<HalfSpace>()
+            || er.has::<SweptSphere>()
+            || er.has::<GeneralizedCylinder>()
+            || er.has::<MeshSolid>()
+    })
 }
 
 fn name_of(world: &World, e: Entity) -> Option<String> {
@@ -129,17 +134,33 @@ fn name_of(world: &World, e: Entity) -> Option<String> {
 /// System: the top-level objects of a world, in order: entities with a shape or a
 /// `CsgNode` that are nobody's CSG child and not `Hidden`.
 pub fn find_objects(world: &World) -> Vec<Entity> {
-    let mut child = std::collections::HashSet::new();
+    let mut child = EntitySet::default();
     for (_, n) in world.query::<&CsgNode>().iter() {
         child.extend(n.children.iter().copied());
     }
-    let mut roots: Vec<(u32, Entity)> = world
-        .iter()
-        .map(|er| er.entity())
-        .filter(|&e| !child.contains(&e) && world.get::<&Hidden>(e).is_err() && is_solid(world, e))
-        .map(|e| (world.get::<&ObjectOrder>(e).map(|o| o.0).unwrap_or(u32::MAX), e))
-        .collect();
-    roots.sort_by_key(|&(o, e)| (o, e.id()));
+    // One query per solid kind (whole archetypes at a time, no lookup per
+    // entity and kind): on 100 000 objects this took 109 ms as lookups.
+    let mut roots: Vec<(u32, Entity)> = Vec::new();
+    fn collect<T: hecs::Component>(world: &World, child: &EntitySet, roots: &mut Vec<(u32, Entity)>) {
+        for (e, o) in world.query::<Option<&ObjectOrder>>().with::<&T>().without::<&Hidden>().iter() {
+            if !child.contains(&e) {
+                roots.push((o.map_or(u32::MAX, |o| o.0), e));
+            }
+        }
+    }
+    collect::<CsgNode>(world, &child, &mut roots);
+    collect::<Sphere>(world, &child, &mut roots);
+    collect::<Cuboid>(world, &child, &mut roots);
+    collect::<Cylinder>(world, &child, &mut roots);
+    collect::<Cone>(world, &child, &mut roots);
+    collect::<Torus>(world, &child, &mut roots);
+    collect::<HalfSpace>(world, &child, &mut roots);
+    collect::<SweptSphere>(world, &child, &mut roots);
+    collect::<GeneralizedCylinder>(world, &child, &mut roots);
+    collect::<MeshSolid>(world, &child, &mut roots);
+    // An entity with two kinds was listed twice: its copies sort together.
+    roots.sort_unstable_by_key(|&(o, e)| (o, e.id()));
+    roots.dedup_by_key(|r| r.1);
     roots.into_iter().map(|(_, e)| e).collect()
 }
 
@@ -257,7 +278,7 @@ enum Visit {
 struct ObjectSink<'a> {
     baked: &'a mut Baked,
     ops: &'a mut Vec<ProgOp>,
-    on_path: &'a mut std::collections::HashSet<Entity>,
+    on_path: &'a mut EntitySet,
     tolerance: f32,
 }
 
@@ -334,7 +355,7 @@ pub(crate) fn bake_objects(world: &World, roots: &[Entity], tolerance: f32) -> R
     // Program nodes reference leaves by index: the leaves are pushed first, in
     // a pass that also records the program's ops, replayed afterwards.
     let mut ops: Vec<ProgOp> = Vec::new();
-    let mut on_path = std::collections::HashSet::new();
+    let mut on_path = EntitySet::default();
     for (oi, &root) in roots.iter().enumerate() {
         let (l0, m0) = (baked.leaves.len() as u32, baked.members.len() as u32);
         let mut sink = ObjectSink { baked: &mut baked, ops: &mut ops, on_path: &mut on_path, tolerance };

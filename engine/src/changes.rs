@@ -12,11 +12,10 @@
 //! archetype for every combination) and does not report despawns, so the
 //! engine keeps its copies to itself.
 
-use std::collections::HashMap;
-
 use hecs::{Component, Entity, World};
 
 use crate::components::*;
+use crate::entity_hash::EntityMap;
 
 /// What changed since the last sync.
 #[derive(Default, Debug)]
@@ -93,7 +92,7 @@ impl<K> Snap<K> {
                 }
                 _ => {
                     // The world's layout changed: match the rest by entity.
-                    let mut old: HashMap<Entity, K> = self.items.drain(i..).collect();
+                    let mut old: EntityMap<K> = self.items.drain(i..).collect();
                     for (e, v) in std::iter::once((e, v)).chain(it) {
                         let k = match old.remove(&e) {
                             Some(k) => match compare(&k, v) {

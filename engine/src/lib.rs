@@ -28,6 +28,7 @@
 
 pub mod bake;
 mod changes;
+mod entity_hash;
 pub mod components;
 mod live;
 #[cfg(test)]

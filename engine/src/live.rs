@@ -16,8 +16,6 @@
 //! the same union. Leaf rows do differ (`Hit::leaf`, `LeafInfo` by index):
 //! compare leaves by entity.
 
-use std::collections::{HashMap, HashSet};
-
 use hecs::{Entity, World};
 use rothray_csg::{NodeKind, ProgramBuilder};
 use rothray_primitives::{Aabb, LeafKind, LeafTable};
@@ -29,6 +27,7 @@ use crate::bake::{
 };
 use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;
+use crate::entity_hash::{EntityMap, EntitySet};
 use crate::refit::Refit;
 use crate::scene::{ObjectInfo, RenderScene};
 
@@ -46,9 +45,9 @@ pub(crate) struct LiveState {
     /// ranges included).
     members: Vec<Entity>,
     /// Entity -> the roots of the objects it is part of.
-    owners: HashMap<Entity, SmallVec<[Entity; 1]>>,
+    owners: EntityMap<SmallVec<[Entity; 1]>>,
     /// Root entity -> object index.
-    index: HashMap<Entity, u32>,
+    index: EntityMap<u32>,
     bvh: Refit,
     cull: Refit,
     /// Rows of objects that were re-baked elsewhere or are gone.
@@ -106,8 +105,8 @@ fn bake_all(world: &World, scene: &mut RenderScene, live: &mut LiveState, tolera
     let mut baked = bake_objects(world, &roots, tolerance)?;
     live.slices = std::mem::take(&mut baked.slices);
     live.members = std::mem::take(&mut baked.members);
-    live.owners.clear();
-    live.index.clear();
+    live.owners = EntityMap::with_capacity_and_hasher(live.members.len(), Default::default());
+    live.index = EntityMap::with_capacity_and_hasher(roots.len(), Default::default());
     for (oi, (s, &root)) in live.slices.iter().zip(&roots).enumerate() {
         live.index.insert(root, oi as u32);
         for &e in &live.members[s.members[0] as usize..s.members[1] as usize] {
@@ -166,8 +165,8 @@ fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, ch
 }
 
 /// The roots of the objects that hold a changed entity.
-fn find_dirty_objects(changes: &Changes, live: &LiveState) -> HashSet<Entity> {
-    let mut dirty = HashSet::new();
+fn find_dirty_objects(changes: &Changes, live: &LiveState) -> EntitySet {
+    let mut dirty = EntitySet::default();
     for e in &changes.dirty {
         if let Some(roots) = live.owners.get(e) {
             dirty.extend(roots.iter().copied());
