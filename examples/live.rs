@@ -1,6 +1,7 @@
 //! A live scene: N objects (each a box minus a sphere) in the tool's own
 //! `hecs::World`, some moving every frame; each frame syncs the baked scene
-//! and picks once. Prints medians of the sync and pick times.
+//! and picks once. Prints medians of the sync and pick times (CPU time of
+//! the process; `ROTHRAY_WALL=1` for wall time).
 //!
 //! ```text
 //! cargo run --release --example live                       # 10 000 objects, 100 moving, 100 frames
@@ -9,7 +10,6 @@
 //! cargo run --release --example live -- --union 1000000    # memory: one union of N spheres
 //! ```
 
-use std::time::Instant;
 
 use glam::{DAffine3, DVec3, Vec3};
 use hecs::{Entity, World};
@@ -44,8 +44,28 @@ fn median(v: &mut [f64]) -> f64 {
     v[v.len() / 2]
 }
 
+/// A point in time: the process's CPU time (all threads), or wall time with
+/// `ROTHRAY_WALL=1`. CPU time, because the figures are taken on machines
+/// shared with other jobs, where wall time varied by 2x from run to run.
+#[derive(Clone, Copy)]
+struct Instant(f64);
+
+impl Instant {
+    fn now() -> Instant {
+        if std::env::var_os("ROTHRAY_WALL").is_some() {
+            static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+            return Instant(START.get_or_init(std::time::Instant::now).elapsed().as_secs_f64() * 1e3);
+        }
+        let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: `ts` is a valid out-pointer for the call.
+        unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+        Instant(ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6)
+    }
+}
+
+/// Milliseconds since `t`.
 fn ms(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
+    Instant::now().0 - t.0
 }
 
 /// `VmHWM` (peak) and `VmRSS` of this process in bytes (Linux).

@@ -13,6 +13,7 @@
 //! engine keeps its copies to itself.
 
 use hecs::{Component, Entity, World};
+use smallvec::SmallVec;
 
 use crate::components::*;
 use crate::entity_hash::EntityMap;
@@ -216,6 +217,9 @@ impl<T: Component + Clone + PartialEq> Snap<T> {
     }
 }
 
+/// A node's children, as copied.
+type Kids = SmallVec<[Entity; 4]>;
+
 /// The snapshots of every component the bake reads.
 #[derive(Default)]
 pub struct Snapshots {
@@ -229,7 +233,7 @@ pub struct Snapshots {
     swept: Snap<SweptSphere>,
     gcyl: Snap<GeneralizedCylinder>,
     mesh: Snap<usize>,
-    node: Snap<(Op, Vec<Entity>)>,
+    node: Snap<(Op, Kids)>,
     material: Snap<[u32; 3]>,
     name: Snap<String>,
     hidden: Snap<()>,
@@ -247,7 +251,10 @@ pub fn detect_changes(world: &World, scope: Scope, snaps: &mut Snapshots) -> Cha
     let value = |same: bool| (!same).then_some(false);
     let order = |same: bool| (!same).then_some(true);
     let bits = |t: &Transform| t.0.to_cols_array().map(f64::to_bits);
-    snaps.transform.scan(world, false, &|k: &[u64; 12], t: &Transform| value(*k == bits(t)), bits, &mut c);
+    // Compared without an early exit, which the compiler vectorises (`==`
+    // on the arrays called memcmp: a quarter of a sync on 100 000 objects).
+    let same_bits = |k: &[u64; 12], t: &Transform| k.iter().zip(bits(t)).fold(0, |d, (a, b)| d | (a ^ b)) == 0;
+    snaps.transform.scan(world, false, &|k: &[u64; 12], t: &Transform| value(same_bits(k, t)), bits, &mut c);
     snaps.sphere.scan_shape(world, &mut c);
     snaps.cuboid.scan_shape(world, &mut c);
     snaps.cylinder.scan_shape(world, &mut c);
@@ -260,8 +267,11 @@ pub fn detect_changes(world: &World, scope: Scope, snaps: &mut Snapshots) -> Cha
     snaps.mesh.scan(world, true, &|k: &usize, m: &MeshSolid| value(*k == ptr(m)), ptr, &mut c);
     // An op change re-bakes one object; a children change can make or unmake
     // objects (a child is no object of its own).
-    let node = |n: &CsgNode| (n.op, n.children.clone());
-    let node_diff = |k: &(Op, Vec<Entity>), n: &CsgNode| if k.1 != n.children { Some(true) } else { value(k.0 == n.op) };
+    // The copy keeps up to four children inline: one memory access less per
+    // node than a `Vec`.
+    let node = |n: &CsgNode| (n.op, SmallVec::from_slice(&n.children));
+    let same_kids = |a: &[Entity], b: &[Entity]| a.len() == b.len() && a.iter().zip(b).fold(0, |d, (x, y)| d | (x.to_bits().get() ^ y.to_bits().get())) == 0;
+    let node_diff = |k: &(Op, Kids), n: &CsgNode| if !same_kids(&k.1, &n.children) { Some(true) } else { value(k.0 == n.op) };
     snaps.node.scan(world, true, &node_diff, node, &mut c);
     let rgb = |m: &Material| m.color.to_array().map(f32::to_bits);
     snaps.material.scan(world, false, &|k: &[u32; 3], m: &Material| value(*k == rgb(m)), rgb, &mut c);
