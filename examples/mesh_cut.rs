@@ -35,7 +35,7 @@ fn main() {
     // span taken out.
     let from = Vec3::new(bounds.min.x - 1.0, bounds.center().y, bounds.center().z);
     let ray = Ray::new(from, Vec3::X);
-    let name = |s: rothray::primitives::Surf| if s.is_real() { scene.leaf_info[s.leaf_index() as usize].name.as_str() } else { "(clipped)" };
+    let name = |s: rothray::primitives::Surf| if s.is_real() { scene.leaf_name(s.leaf_index()).into_owned() } else { "(clipped)".into() };
     let spans = scene.spans_of(&ray, cut);
     println!("ray from {from:.3} along +x: {} span(s) of the cut", spans.len());
     for sp in &spans {

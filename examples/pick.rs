@@ -38,7 +38,7 @@ fn main() {
             let label = match hit {
                 Some(h) => {
                     let object = &scene.objects[h.object as usize].name;
-                    let leaf = &scene.leaf_info[h.leaf as usize].name;
+                    let leaf = scene.leaf_name(h.leaf);
                     format!("{object}/{leaf}")
                 }
                 None => "-".into(),

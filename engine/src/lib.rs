@@ -33,6 +33,7 @@ pub mod components;
 mod live;
 #[cfg(test)]
 mod live_tests;
+mod owners;
 mod packet;
 pub mod part;
 mod refit;

@@ -19,7 +19,6 @@
 use hecs::{Entity, World};
 use rothray_csg::{NodeKind, ProgramBuilder};
 use rothray_primitives::{Aabb, LeafKind, LeafTable};
-use smallvec::SmallVec;
 
 use crate::bake::{
     bake_objects, build_object_trees, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, Baked,
@@ -28,6 +27,7 @@ use crate::bake::{
 use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;
 use crate::entity_hash::{EntityMap, EntitySet};
+use crate::owners::Owners;
 use crate::refit::Refit;
 use crate::scene::{ObjectInfo, RenderScene};
 
@@ -45,7 +45,7 @@ pub(crate) struct LiveState {
     /// ranges included).
     members: Vec<Entity>,
     /// Entity -> the roots of the objects it is part of.
-    owners: EntityMap<SmallVec<[Entity; 1]>>,
+    owners: Owners,
     /// Root entity -> object index.
     index: EntityMap<u32>,
     bvh: Refit,
@@ -105,12 +105,12 @@ fn bake_all(world: &World, scene: &mut RenderScene, live: &mut LiveState, tolera
     let mut baked = bake_objects(world, &roots, tolerance)?;
     live.slices = std::mem::take(&mut baked.slices);
     live.members = std::mem::take(&mut baked.members);
-    live.owners = EntityMap::with_capacity_and_hasher(live.members.len(), Default::default());
+    live.owners.reset(live.members.iter().map(|e| e.id() as usize + 1).max().unwrap_or(0));
     live.index = EntityMap::with_capacity_and_hasher(roots.len(), Default::default());
     for (oi, (s, &root)) in live.slices.iter().zip(&roots).enumerate() {
         live.index.insert(root, oi as u32);
         for &e in &live.members[s.members[0] as usize..s.members[1] as usize] {
-            live.owners.entry(e).or_default().push(root);
+            live.owners.add(e, root);
         }
     }
     live.dead_leaves = 0;
@@ -168,9 +168,7 @@ fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, ch
 fn find_dirty_objects(changes: &Changes, live: &LiveState) -> EntitySet {
     let mut dirty = EntitySet::default();
     for e in &changes.dirty {
-        if let Some(roots) = live.owners.get(e) {
-            dirty.extend(roots.iter().copied());
-        }
+        dirty.extend(live.owners.roots(*e));
     }
     dirty
 }
@@ -260,20 +258,13 @@ fn object_name(world: &World, root: Entity, oi: u32) -> String {
 
 fn forget_members(live: &mut LiveState, root: Entity, s: Slice) {
     for &e in &live.members[s.members[0] as usize..s.members[1] as usize] {
-        if let Some(os) = live.owners.get_mut(&e) {
-            if let Some(p) = os.iter().position(|&r| r == root) {
-                os.swap_remove(p);
-            }
-            if os.is_empty() {
-                live.owners.remove(&e);
-            }
-        }
+        live.owners.remove(e, root);
     }
 }
 
 fn own_members(live: &mut LiveState, root: Entity, s: Slice) {
-    for k in s.members[0]..s.members[1] {
-        live.owners.entry(live.members[k as usize]).or_default().push(root);
+    for &e in &live.members[s.members[0] as usize..s.members[1] as usize] {
+        live.owners.add(e, root);
     }
 }
 
@@ -371,12 +362,6 @@ fn copy_leaves(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
         put(&mut dst.bounds, b, src.bounds[a]);
         put(&mut dst.ext, b, ext as u32);
         put(&mut scene.leaf_info, b, baked.leaf_info[a].clone());
-    }
-    // Leaves without a `Name` are named by their row.
-    for &l in &baked.unnamed {
-        if (s.leaves[0]..s.leaves[1]).contains(&l) {
-            scene.leaf_info[(l - s.leaves[0] + at.leaves[0]) as usize].name = format!("leaf{}", l - s.leaves[0] + at.leaves[0]);
-        }
     }
 }
 

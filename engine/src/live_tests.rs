@@ -8,6 +8,7 @@ use hecs::{Entity, World};
 use rand::{rngs::SmallRng, Rng, SeedableRng};
 use std::sync::Arc;
 
+use crate::live::LiveCounts;
 use crate::*;
 
 fn seed_from_env(default: u64) -> u64 {
@@ -151,12 +152,16 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>, touched: &m
             "radius"
         }
         7 => {
-            // A leaf child moves to another node (leaves only: no cycles).
+            // A leaf child moves to another node (leaves only: no cycles), or
+            // is shared with it.
             let (Some(a), Some(b)) = (pick::<CsgNode>(world, rng), pick::<CsgNode>(world, rng)) else { return "reparent" };
             let kids = world.get::<&CsgNode>(a).unwrap().children.clone();
             let leaves: Vec<usize> = (0..kids.len()).filter(|&i| is_leaf(world, kids[i])).collect();
             if a != b && kids.len() > 1 && !leaves.is_empty() {
-                let c = world.get::<&mut CsgNode>(a).unwrap().children.remove(leaves[rng.gen_range(0..leaves.len())]);
+                let at = leaves[rng.gen_range(0..leaves.len())];
+                // Now and then the leaf stays where it was too: two trees share it.
+                let share = rng.gen_bool(0.3);
+                let c = if share { kids[at] } else { world.get::<&mut CsgNode>(a).unwrap().children.remove(at) };
                 world.get::<&mut CsgNode>(b).unwrap().children.push(c);
                 touched.extend([a, b]);
             }
@@ -273,6 +278,13 @@ fn compare(live: &RenderScene, fresh: &RenderScene, rng: &mut SmallRng, what: &s
     }
 }
 
+fn add_counts(total: &mut LiveCounts, c: LiveCounts) {
+    total.full += c.full;
+    total.partial += c.partial;
+    total.in_place += c.in_place;
+    total.appended += c.appended;
+}
+
 /// Random edits (spawn, despawn, move, reshape, radius, re-parent, op, hide,
 /// material, add and remove a mesh, rename, order), a sync after each batch,
 /// each synced scene compared with a fresh full bake.
@@ -281,7 +293,7 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
     let seed = seed_from_env(13);
     let mut rng = SmallRng::seed_from_u64(seed);
     let mesh = cube_mesh();
-    let mut total = crate::live::LiveCounts::default();
+    let (mut total, mut last) = (LiveCounts::default(), LiveCounts::default());
     for world_no in 0..6 {
         let mut world = World::new();
         for _ in 0..rng.gen_range(0..12) {
@@ -310,14 +322,15 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
                 }
                 Err(e) => assert_eq!(got.err(), Some(e), "{what}: errors"),
             }
+            // A failed sync drops the live state, and its counts with it.
+            match scene.live.as_ref() {
+                Some(l) => last = l.counts,
+                None => add_counts(&mut total, std::mem::take(&mut last)),
+            }
         }
-        let c = scene.live.as_ref().map(|l| l.counts).unwrap_or_default();
-        println!("world {world_no}: {c:?}");
-        total.full += c.full;
-        total.partial += c.partial;
-        total.in_place += c.in_place;
-        total.appended += c.appended;
+        add_counts(&mut total, std::mem::take(&mut last));
     }
+    println!("{total:?}");
     assert!(total.full > 0 && total.partial > 50 && total.in_place > 0 && total.appended > 0, "every path ran: {total:?}");
 }
 

@@ -74,7 +74,8 @@ pub struct ObjectInfo {
 pub struct LeafInfo {
     /// Its entity.
     pub entity: Entity,
-    /// Its name (`Name`, else `leaf<i>`).
+    /// Its `Name` (empty without one; [`RenderScene::leaf_name`] then
+    /// gives `leaf<i>`).
     pub name: String,
     /// Its colour (own `Material`, else the nearest ancestor's, else grey).
     pub color: Vec3,
