@@ -8,6 +8,7 @@
 //! cargo run --release --example live -- --objects 100000 --moving 1
 //! cargo run --release --example live -- --frames 1000      # and the trace speed after them
 //! cargo run --release --example live -- --union 1000000    # memory: one union of N spheres
+//! cargo run --release --example live -- --union 1000000 --static 1   # the same by bake_scene
 //! ```
 
 
@@ -21,10 +22,12 @@ struct Args {
     moving: usize,
     frames: usize,
     union: usize,
+    /// `--static 1`: the union baked by `bake_scene` (no sync state).
+    fixed: bool,
 }
 
 fn parse_args() -> Args {
-    let mut a = Args { objects: 10_000, moving: 100, frames: 100, union: 0 };
+    let mut a = Args { objects: 10_000, moving: 100, frames: 100, union: 0, fixed: false };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     for pair in argv.chunks(2) {
         let v = pair.get(1).and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{}: a number please", pair[0]));
@@ -33,6 +36,7 @@ fn parse_args() -> Args {
             "--moving" => a.moving = v,
             "--frames" => a.frames = v,
             "--union" => a.union = v,
+            "--static" => a.fixed = v != 0,
             o => panic!("unknown option {o}"),
         }
     }
@@ -206,8 +210,9 @@ fn trace_speed(world: &mut World, scene: &RenderScene, rng: &mut SmallRng) {
     println!("20 000 picks (best of 3): live scene {tl:.1} ms, fresh live scene {tr:.1} ms, fresh bake {tf:.1} ms ({:.2}x, {:.2}x)", tl / tr, tl / tf);
 }
 
-/// Memory: one union of `n` spheres, baked once.
-fn union(n: usize) {
+/// Memory: one union of `n` spheres, baked once (by `sync_scene`, or by
+/// `bake_scene` when `fixed`).
+fn union(n: usize, fixed: bool) {
     let mut rng = SmallRng::seed_from_u64(13);
     let mut world = World::new();
     let side = extent(n);
@@ -221,18 +226,24 @@ fn union(n: usize) {
     let (_, before) = rss();
     let mut scene = RenderScene::default();
     let t = Instant::now();
-    sync_scene(&mut world, &mut scene).unwrap();
+    if fixed {
+        bake_scene(&world, &mut scene).unwrap();
+    } else {
+        sync_scene(&mut world, &mut scene).unwrap();
+    }
     let bake = ms(t);
     let (peak, after) = rss();
     println!(
-        "union of {n} spheres: sync {bake:.0} ms; RSS {:.0} MB before the sync, {:.0} MB after, peak {:.0} MB",
+        "union of {n} spheres: {} {bake:.0} ms; RSS {:.0} MB before the sync, {:.0} MB after, peak {:.0} MB",
+        if fixed { "bake_scene" } else { "sync_scene" },
         before as f64 / 1e6,
         after as f64 / 1e6,
         peak as f64 / 1e6
     );
     println!(
-        "per leaf: {:.0} bytes kept by the scene and its sync state, {:.0} bytes at the peak",
+        "per leaf: {:.0} bytes kept by the scene{}, {:.0} bytes at the peak",
         (after - before) as f64 / n as f64,
+        if fixed { "" } else { " and its sync state" },
         (peak - before) as f64 / n as f64
     );
 }
@@ -240,7 +251,7 @@ fn union(n: usize) {
 fn main() {
     let a = parse_args();
     if a.union > 0 {
-        union(a.union);
+        union(a.union, a.fixed);
     } else {
         live(&a);
     }
