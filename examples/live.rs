@@ -11,7 +11,6 @@
 //! cargo run --release --example live -- --union 1000000 --static 1   # the same by bake_scene
 //! ```
 
-
 use glam::{DAffine3, DVec3, Vec3};
 use hecs::{Entity, World};
 use rand::{rngs::SmallRng, Rng, SeedableRng};
@@ -207,7 +206,11 @@ fn trace_speed(world: &mut World, scene: &RenderScene, rng: &mut SmallRng) {
     let (tr, nr) = time(&relive);
     let (tf, nf) = time(&fresh);
     assert!(nl == nf && nr == nf, "the live scenes and a fresh bake hit as often");
-    println!("20 000 picks (best of 3): live scene {tl:.1} ms, fresh live scene {tr:.1} ms, fresh bake {tf:.1} ms ({:.2}x, {:.2}x)", tl / tr, tl / tf);
+    println!(
+        "20 000 picks (best of 3): live scene {tl:.1} ms, fresh live scene {tr:.1} ms, fresh bake {tf:.1} ms ({:.2}x, {:.2}x)",
+        tl / tr,
+        tl / tf
+    );
 }
 
 /// Memory: one union of `n` spheres, baked once (by `sync_scene`, or by

@@ -13,7 +13,8 @@ use rothray::engine::*;
 use rothray::io::mesh::load_mesh_data;
 
 fn main() {
-    let path = std::env::args().nth(1).map(PathBuf::from).unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/bunny.obj"));
+    let path =
+        std::env::args().nth(1).map(PathBuf::from).unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/bunny.obj"));
     let (mesh, warnings) = load_mesh_data(&path, InsideRule::Orientation).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     for w in &warnings {
         println!("warning: {w}");

@@ -14,7 +14,8 @@ fn main() {
     // A box with a spherical bite, a capsule-like union, and a lens (the
     // intersection of two spheres).
     let b = world.spawn((Name::new("box"), Cuboid { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) }));
-    let s = world.spawn((Name::new("bite"), Transform::from_translation(Vec3::new(0.8, 0.8, 0.8)), Sphere { center: Vec3::ZERO, radius: 0.9 }));
+    let s =
+        world.spawn((Name::new("bite"), Transform::from_translation(Vec3::new(0.8, 0.8, 0.8)), Sphere { center: Vec3::ZERO, radius: 0.9 }));
     world.spawn((Name::new("bitten box"), CsgNode::difference([b, s]), Transform::from_translation(Vec3::new(-2.5, 0.0, 0.0))));
     let c = world.spawn((Name::new("rod"), Cylinder { a: Vec3::new(0.0, -1.0, 0.0), b: Vec3::new(0.0, 1.0, 0.0), radius: 0.5 }));
     let top = world.spawn((Name::new("top"), Sphere { center: Vec3::new(0.0, 1.0, 0.0), radius: 0.5 }));

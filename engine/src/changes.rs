@@ -77,7 +77,14 @@ impl<K> Snap<K> {
     /// up to date (`key`, called only for what changed); records the
     /// entities whose `T` was added, changed or removed. `presence`: adding or
     /// removing a `T` is structural.
-    fn scan_all<T: Component>(&mut self, world: &World, presence: bool, compare: impl Fn(&K, &T) -> Option<bool>, key: impl Fn(&T) -> K, out: &mut Changes) {
+    fn scan_all<T: Component>(
+        &mut self,
+        world: &World,
+        presence: bool,
+        compare: impl Fn(&K, &T) -> Option<bool>,
+        key: impl Fn(&T) -> K,
+        out: &mut Changes,
+    ) {
         let mut q = world.query::<&T>();
         let mut it = q.iter();
         let mut i = 0;
@@ -270,7 +277,9 @@ pub fn detect_changes(world: &World, scope: Scope, snaps: &mut Snapshots) -> Cha
     // The copy keeps up to four children inline: one memory access less per
     // node than a `Vec`.
     let node = |n: &CsgNode| (n.op, SmallVec::from_slice(&n.children));
-    let same_kids = |a: &[Entity], b: &[Entity]| a.len() == b.len() && a.iter().zip(b).fold(0, |d, (x, y)| d | (x.to_bits().get() ^ y.to_bits().get())) == 0;
+    let same_kids = |a: &[Entity], b: &[Entity]| {
+        a.len() == b.len() && a.iter().zip(b).fold(0, |d, (x, y)| d | (x.to_bits().get() ^ y.to_bits().get())) == 0
+    };
     let node_diff = |k: &(Op, Kids), n: &CsgNode| if !same_kids(&k.1, &n.children) { Some(true) } else { value(k.0 == n.op) };
     snaps.node.scan(world, true, &node_diff, node, &mut c);
     let rgb = |m: &Material| m.color.to_array().map(f32::to_bits);

@@ -28,8 +28,8 @@
 
 pub mod bake;
 mod changes;
-mod entity_hash;
 pub mod components;
+mod entity_hash;
 mod live;
 #[cfg(test)]
 mod live_tests;

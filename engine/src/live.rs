@@ -175,7 +175,15 @@ fn find_dirty_objects(changes: &Changes, live: &LiveState) -> EntitySet {
 
 /// Puts object `k` of `baked` into the scene's tables as object `oi` (over
 /// or instead of the rows of `old`); returns its info and rows.
-fn rebake_object(world: &World, scene: &mut RenderScene, live: &mut LiveState, baked: &Baked, k: usize, oi: u32, old: Option<Slice>) -> (ObjectInfo, Slice) {
+fn rebake_object(
+    world: &World,
+    scene: &mut RenderScene,
+    live: &mut LiveState,
+    baked: &Baked,
+    k: usize,
+    oi: u32,
+    old: Option<Slice>,
+) -> (ObjectInfo, Slice) {
     let root = baked.objects[k].entity;
     if let Some(s) = old {
         forget_members(live, root, s);
@@ -372,7 +380,11 @@ fn copy_nodes(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
     let shift = |x: u32, from: [u32; 2], to: [u32; 2]| x - from[0] + to[0];
     for i in 0..len(s.nodes) as usize {
         let (a, b) = (s.nodes[0] as usize + i, at.nodes[0] as usize + i);
-        let first = if src.kind[a] == NodeKind::Leaf { shift(src.first[a], s.leaves, at.leaves) } else { shift(src.first[a], s.children, at.children) };
+        let first = if src.kind[a] == NodeKind::Leaf {
+            shift(src.first[a], s.leaves, at.leaves)
+        } else {
+            shift(src.first[a], s.children, at.children)
+        };
         let wide = if src.wide[a] == u32::MAX { u32::MAX } else { shift(src.wide[a], s.wides, at.wides) };
         put(&mut dst.kind, b, src.kind[a]);
         put(&mut dst.first, b, first);

@@ -26,7 +26,20 @@ fn v3(rng: &mut SmallRng, r: f32) -> Vec3 {
 
 fn cube_mesh() -> Arc<MeshData> {
     let p: Vec<Vec3> = (0..8).map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32) - 0.5).collect();
-    let t = vec![[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4], [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]];
+    let t = vec![
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
     Arc::new(MeshData::new(p, t, InsideRule::Winding).expect("cube mesh"))
 }
 
@@ -227,7 +240,13 @@ fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>, touched: &m
 
 /// A span with its surfaces named by entity.
 fn span_key(s: &RenderScene, sp: &primitives::Span) -> String {
-    let surf = |x: primitives::Surf| if x.is_real() { format!("{:?}/{}/{}", s.leaf_info[x.leaf_index() as usize].entity, x.sub, x.flipped()) } else { "-".into() };
+    let surf = |x: primitives::Surf| {
+        if x.is_real() {
+            format!("{:?}/{}/{}", s.leaf_info[x.leaf_index() as usize].entity, x.sub, x.flipped())
+        } else {
+            "-".into()
+        }
+    };
     format!("[{:08x} {} {:08x} {}]", sp.t0.to_bits(), surf(sp.s0), sp.t1.to_bits(), surf(sp.s1))
 }
 
