@@ -127,10 +127,6 @@ fn is_solid(world: &World, e: Entity) -> bool {
     })
 }
 
-fn name_of(world: &World, e: Entity) -> Option<String> {
-    world.get::<&Name>(e).ok().map(|n| n.0.clone())
-}
-
 /// System: the top-level objects of a world, in order: entities with a shape or a
 /// `CsgNode` that are nobody's CSG child and not `Hidden`.
 pub fn find_objects(world: &World) -> Vec<Entity> {
@@ -280,44 +276,93 @@ struct ObjectSink<'a> {
     tolerance: f32,
 }
 
+/// The shape components of an entity.
+type ShapeQuery<'a> = (
+    Option<&'a Sphere>,
+    Option<&'a Cuboid>,
+    Option<&'a Cylinder>,
+    Option<&'a Cone>,
+    Option<&'a Torus>,
+    Option<&'a HalfSpace>,
+    Option<&'a SweptSphere>,
+    Option<&'a GeneralizedCylinder>,
+    Option<&'a MeshSolid>,
+);
+
+/// Everything the bake reads of an entity, fetched through one `hecs` view:
+/// an entity lookup per entity instead of a lookup and a borrow per
+/// component (15 of them per entity made the bake of 100 000 objects take
+/// 184 ms).
+type BakeQuery<'a> = (Option<&'a Transform>, Option<&'a Material>, Option<&'a Name>, Option<&'a CsgNode>, ShapeQuery<'a>);
+
+/// A leaf entity's shape, borrowed.
+enum LeafRef<'a> {
+    Analytic(LeafShape),
+    Swept(&'a SweptSphere),
+    GenCyl(&'a GeneralizedCylinder),
+    Mesh(&'a Arc<MeshData>),
+}
+
+fn leaf_ref<'a>(s: &ShapeQuery<'a>) -> Option<LeafRef<'a>> {
+    let analytic = match *s {
+        (Some(x), ..) => Some(LeafShape::Sphere(*x)),
+        (_, Some(x), ..) => Some(LeafShape::Cuboid(*x)),
+        (_, _, Some(x), ..) => Some(LeafShape::Cylinder(*x)),
+        (_, _, _, Some(x), ..) => Some(LeafShape::Cone(*x)),
+        (_, _, _, _, Some(x), ..) => Some(LeafShape::Torus(*x)),
+        (_, _, _, _, _, Some(x), ..) => Some(LeafShape::HalfSpace(*x)),
+        _ => None,
+    };
+    if let Some(a) = analytic {
+        return Some(LeafRef::Analytic(a));
+    }
+    match *s {
+        (.., Some(x), _, _) => Some(LeafRef::Swept(x)),
+        (.., Some(x), _) => Some(LeafRef::GenCyl(x)),
+        (.., Some(x)) => Some(LeafRef::Mesh(&x.0)),
+        _ => None,
+    }
+}
+
 /// Flattens the tree of `root` (object `oi`) into leaf rows, `leaf_info`
 /// rows, member entities and post-order ops (ending with its `Root`).
 /// Iterative, so any nesting depth works.
-fn bake_object(world: &World, root: Entity, oi: u32, sink: &mut ObjectSink) -> Result<(), BakeError> {
+fn bake_object(view: &hecs::ViewBorrow<BakeQuery>, root: Entity, oi: u32, sink: &mut ObjectSink) -> Result<(), BakeError> {
     let ObjectSink { baked, ops, on_path, tolerance } = sink;
     let (leaves, leaf_info) = (&mut baked.leaves, &mut baked.leaf_info);
     let mut stack = vec![Visit::Enter(root, DAffine3::IDENTITY, None)];
     while let Some(v) = stack.pop() {
         match v {
             Visit::Enter(e, parent, color) => {
-                let Ok(er) = world.entity(e) else { return Err(BakeError::NotASolid { entity: e }) };
+                let Some((transform, material, name, node, shapes)) = view.get(e) else { return Err(BakeError::NotASolid { entity: e }) };
                 baked.members.push(e);
-                let global = parent * er.get::<&Transform>().map(|t| t.0).unwrap_or(DAffine3::IDENTITY);
-                let color = er.get::<&Material>().map(|m| m.color).or(color);
-                if let Some(desc) = leaf_desc(world, e) {
-                    let bad = |error: rothray_primitives::ShapeError| BakeError::BadShape { entity: e, name: name_of(world, e), error };
+                let global = parent * transform.map(|t| t.0).unwrap_or(DAffine3::IDENTITY);
+                let color = material.map(|m| m.color).or(color);
+                let name_of = || name.map(|n| n.0.clone());
+                if let Some(desc) = leaf_ref(&shapes) {
+                    let bad = |error: rothray_primitives::ShapeError| BakeError::BadShape { entity: e, name: name_of(), error };
                     let pushed = match desc {
-                        LeafDesc::Analytic(shape) => leaves.push(&shape, &global),
-                        LeafDesc::Swept(d) => {
-                            let data = SweptSphereData::new(&d, *tolerance).map_err(bad)?;
+                        LeafRef::Analytic(shape) => leaves.push(&shape, &global),
+                        LeafRef::Swept(d) => {
+                            let data = SweptSphereData::new(d, *tolerance).map_err(bad)?;
                             leaves.push_data(&LeafData::SweptSphere(Arc::new(data)), &global)
                         }
-                        LeafDesc::GenCyl(d) => {
-                            let data = GenCylData::new(&d, *tolerance).map_err(bad)?;
+                        LeafRef::GenCyl(d) => {
+                            let data = GenCylData::new(d, *tolerance).map_err(bad)?;
                             leaves.push_data(&LeafData::GenCylinder(Arc::new(data)), &global)
                         }
-                        LeafDesc::Mesh(m) => leaves.push_data(&LeafData::Mesh(m), &global),
+                        LeafRef::Mesh(m) => leaves.push_data(&LeafData::Mesh(m.clone()), &global),
                     };
                     let idx = pushed.map_err(|err| match err {
-                        LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(world, e), error },
-                        LeafError::SingularTransform => BakeError::SingularTransform { entity: e, name: name_of(world, e) },
+                        LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(), error },
+                        LeafError::SingularTransform => BakeError::SingularTransform { entity: e, name: name_of() },
                     })?;
                     // No default text per leaf (`RenderScene::leaf_name` makes
                     // it): 32 bytes per leaf on a union of 10^6 spheres.
-                    let name = name_of(world, e).unwrap_or_default();
+                    let name = name_of().unwrap_or_default();
                     leaf_info.push(LeafInfo { entity: e, name, color: color.unwrap_or(Vec3::splat(0.8)), object: oi });
                     ops.push(ProgOp::Leaf(idx));
-                } else if let Some(node) = er.get::<&CsgNode>() {
+                } else if let Some(node) = node {
                     if node.children.is_empty() {
                         return Err(BakeError::BadNode { entity: e, message: "CSG node without children".into() });
                     }
@@ -326,7 +371,8 @@ fn bake_object(world: &World, root: Entity, oi: u32, sink: &mut ObjectSink) -> R
                     }
                     stack.push(Visit::Exit(e, node.op, node.children.len()));
                     for &c in node.children.iter().rev() {
-                        if !is_solid(world, c) {
+                        let solid = view.get(c).is_some_and(|(_, _, _, n, s)| n.is_some() || leaf_ref(&s).is_some());
+                        if !solid {
                             return Err(BakeError::NotASolid { entity: c });
                         }
                         stack.push(Visit::Enter(c, global, color));
@@ -353,15 +399,16 @@ pub(crate) fn bake_objects(world: &World, roots: &[Entity], tolerance: f32) -> R
     // a pass that also records the program's ops, replayed afterwards.
     let mut ops: Vec<ProgOp> = Vec::new();
     let mut on_path = EntitySet::default();
+    let view = world.view::<BakeQuery>();
     for (oi, &root) in roots.iter().enumerate() {
         let (l0, m0) = (baked.leaves.len() as u32, baked.members.len() as u32);
         let mut sink = ObjectSink { baked: &mut baked, ops: &mut ops, on_path: &mut on_path, tolerance };
-        bake_object(world, root, oi as u32, &mut sink)?;
+        bake_object(&view, root, oi as u32, &mut sink)?;
         let (l1, m1) = (baked.leaves.len() as u32, baked.members.len() as u32);
         baked.slices.push(Slice { leaves: [l0, l1], members: [m0, m1], ..Slice::default() });
         baked.objects.push(ObjectInfo {
             entity: root,
-            name: name_of(world, root).unwrap_or_else(|| format!("object{oi}")),
+            name: view.get(root).and_then(|q| q.2).map_or_else(|| format!("object{oi}"), |n| n.0.clone()),
             root: 0,
             bounds: Aabb::EMPTY,
         });
