@@ -268,6 +268,25 @@ fn hit_key(s: &RenderScene, h: Option<Hit>) -> String {
     }
 }
 
+/// The renderer (tiles culled by the object cull tree, packets) draws the
+/// same normal picture of both scenes.
+fn compare_pictures(live: &RenderScene, fresh: &RenderScene, what: &str) {
+    let cam = Camera { eye: Vec3::new(9.0, 12.0, 30.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 50.0 };
+    let s = RenderSettings {
+        width: 64,
+        height: 48,
+        spp: 1,
+        aov: Aov::Normal,
+        background: Vec3::ZERO,
+        lights: Vec::new(),
+        ambient: 0.2,
+        part: Part::WHOLE,
+    };
+    let (a, _) = render(live, &cam, &s, &|_, _| {});
+    let (b, _) = render(fresh, &cam, &s, &|_, _| {});
+    assert!(a == b, "{what}: the normal pictures differ");
+}
+
 /// Every answer of `live` equals that of `fresh` on random rays and points.
 fn compare(live: &RenderScene, fresh: &RenderScene, rng: &mut SmallRng, what: &str) {
     let objs = |s: &RenderScene| -> Vec<String> {
@@ -338,6 +357,9 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
                 Ok(fresh) => {
                     assert!(got.is_ok(), "{what}: live sync failed ({got:?}) where a fresh bake works");
                     compare(&scene, &fresh, &mut rng, &what);
+                    if step % 10 == 0 {
+                        compare_pictures(&scene, &fresh, &what);
+                    }
                 }
                 Err(e) => assert_eq!(got.err(), Some(e), "{what}: errors"),
             }
@@ -388,6 +410,7 @@ fn live_refits_many_objects_like_a_fresh_bake() {
         if round % 10 == 9 {
             let fresh = RenderScene::from_world(&world).unwrap();
             compare(&scene, &fresh, &mut rng, &format!("seed {seed} round {round}"));
+            compare_pictures(&scene, &fresh, &format!("seed {seed} round {round}"));
         }
     }
     let c = scene.live.as_ref().unwrap().counts;
