@@ -56,8 +56,13 @@ fn spawn_leaf(world: &mut World, rng: &mut SmallRng, spread: f32) -> Entity {
 
 fn insert_shape(world: &mut World, rng: &mut SmallRng, e: Entity) {
     let r = rng.gen_range(0.3..1.2);
-    match rng.gen_range(0..4) {
+    match rng.gen_range(0..5) {
         0 => world.insert_one(e, Sphere { center: v3(rng, 0.3), radius: r }),
+        4 => {
+            // A swept sphere: its data sits in the leaf table's own list.
+            let p = |t: f32| [t - 0.5, 0.3 * t, 0.0, 0.2 + 0.1 * t];
+            world.insert_one(e, SweptSphere { bezier: vec![p(0.0), p(0.3), p(0.7), p(1.0)] })
+        }
         1 => world.insert_one(e, Cuboid { min: Vec3::splat(-r), max: Vec3::splat(r) + v3(rng, 0.2).abs() }),
         2 => world.insert_one(e, Cylinder { a: Vec3::new(0.0, -r, 0.0), b: Vec3::new(0.1, r, 0.0), radius: r * 0.5 }),
         _ => world.insert_one(e, Torus { center: Vec3::ZERO, axis: Vec3::Y, major: r, minor: r * 0.3 }),
@@ -71,6 +76,7 @@ fn remove_shape(world: &mut World, e: Entity) {
     let _ = world.remove_one::<Cylinder>(e);
     let _ = world.remove_one::<Torus>(e);
     let _ = world.remove_one::<MeshSolid>(e);
+    let _ = world.remove_one::<SweptSphere>(e);
 }
 
 fn random_op(rng: &mut SmallRng) -> Op {
