@@ -2,7 +2,7 @@
 //! [`find_objects`] lists the root solids, [`bake_scene`] flattens each
 //! tree into the post-order CSG program and the SoA leaf table and builds the
 //! object BVHs, [`sync_scene`] re-bakes the objects that changed (see
-//! [`crate::live`]).
+//! `engine/src/live.rs`).
 
 use glam::{DAffine3, Vec3};
 use hecs::{Entity, World};
@@ -170,8 +170,9 @@ impl<H: std::hash::Hasher> std::fmt::Write for HashWriter<'_, H> {
     }
 }
 
-/// A cheap fingerprint of everything the bake reads, so [`sync_scene`] can skip
-/// work when nothing changed.
+/// A fingerprint of everything the bake reads (the `Debug` text of every
+/// component, hashed: a pass over the whole world). [`sync_scene`] no longer
+/// uses it: it compares with copies per component (see `engine/src/live.rs`).
 pub fn fingerprint_world(world: &World) -> u64 {
     use std::fmt::Write;
     use std::hash::{Hash, Hasher};
@@ -219,7 +220,7 @@ pub fn fingerprint_world(world: &World) -> u64 {
 
 /// System: brings `scene` up to date with `world`, re-baking only the objects
 /// whose inputs changed since the last call (returns whether anything was
-/// baked). The first call bakes everything; see [`crate::live`].
+/// baked). The first call bakes everything; see `engine/src/live.rs`.
 pub fn sync_scene(world: &mut World, scene: &mut RenderScene) -> Result<bool, BakeError> {
     crate::live::sync_live(world, crate::changes::Scope::All, scene)
 }
