@@ -15,7 +15,7 @@ fn check_random_ray(scene: &RenderScene, tree: &Shape, rng: &mut SmallRng, ctx: 
     let (o, d) = random_ray(rng);
     let ray = to_ray(o, d);
     let spans = scene.spans(&ray, 0);
-    check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("{ctx} tree {}", tree.json()), st);
+    check_spans(&f, &to_ray(o, d), &spans, 1e-4, &format!("{ctx} tree {}", tree.json()), st);
     // The nearest hit is the first real surface of the Roth diagram.
     let hit = scene.intersect(&ray);
     let expect = first_surface_t(&spans);
@@ -104,7 +104,7 @@ fn wide_nodes_match_narrow_evaluation() {
         for r in 0..1500 {
             let (o, d) = random_ray(&mut rng);
             let spans = scene.spans(&to_ray(o, d), oi as u32);
-            check_spans(&f, o, d, 0.0, f64::INFINITY, &spans, 1e-4, &format!("object {oi} ray {r}"), &mut st);
+            check_spans(&f, &to_ray(o, d), &spans, 1e-4, &format!("object {oi} ray {r}"), &mut st);
         }
     }
     println!("{st:?} span lists spilled so far: {}", rothray::csg::spill_count());
@@ -123,7 +123,7 @@ fn long_span_lists_spill_and_stay_correct() {
     assert_eq!(spans.len(), 40);
     assert!(rothray::csg::spill_count() > before, "a 40-span list must spill (inline capacity {})", rothray::csg::spans::INLINE_SPANS);
     let mut st = Check::default();
-    check_spans(&|p| u.inside(p), o, d, 0.0, f64::INFINITY, &spans, 1e-5, "line of balls", &mut st);
+    check_spans(&|p| u.inside(p), &to_ray(o, d), &spans, 1e-5, "line of balls", &mut st);
 }
 
 #[test]
@@ -266,14 +266,8 @@ fn packet_shortcut_keeps_the_short_span_rule() {
     remove_mesh_files(std::slice::from_ref(&mesh));
     let d = glam::Vec3::new(1e-4, 1e-4, -1.0);
     let o = glam::Vec3::new(1.0 - 1e-5, 0.0, 0.0) - d * 5.0;
-    let packet: Vec<rothray::engine::Ray> = (0..8)
-        .map(|k| rothray::engine::Ray {
-            origin: o,
-            dir: d + glam::Vec3::new(k as f32 * 1e-6, (k / 4) as f32 * 1e-6, 0.0),
-            tmin: 0.0,
-            tmax: f32::INFINITY,
-        })
-        .collect();
+    let packet: Vec<rothray::engine::Ray> =
+        (0..8).map(|k| rothray::engine::Ray::new(o, d + glam::Vec3::new(k as f32 * 1e-6, (k / 4) as f32 * 1e-6, 0.0))).collect();
     let mut ps = rothray::engine::PacketScratch::default();
     let mut out = [None; 8];
     scene.intersect_packet(&packet, &mut ps, &mut out);

@@ -343,21 +343,11 @@ pub struct Check {
 
 /// Checks the engine's spans of one ray against the f64 predicate:
 /// sorted and disjoint; span midpoints inside; gaps (sampled) outside; every
-/// real end within `tol` (in units of length) of an f64 crossing.
-#[allow(clippy::too_many_arguments)] // until one `Ray` type carries o, d, tmin, tmax (issue 11)
-pub fn check_spans(
-    f: &dyn Fn(DVec3) -> bool,
-    o: DVec3,
-    d: DVec3,
-    tmin: f64,
-    tmax: f64,
-    spans: &[Span],
-    tol: f64,
-    ctx: &str,
-    st: &mut Check,
-) {
-    // The engine sees the ray in f32: judge it on the same ray.
-    let (o, d) = (o.as_vec3().as_dvec3(), d.as_vec3().as_dvec3());
+/// real end within `tol` (in units of length) of an f64 crossing. The ray is
+/// the f32 ray the engine traced, judged in f64.
+pub fn check_spans(f: &dyn Fn(DVec3) -> bool, ray: &Ray, spans: &[Span], tol: f64, ctx: &str, st: &mut Check) {
+    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+    let (tmin, tmax) = (ray.tmin as f64, ray.tmax as f64);
     st.rays += 1;
     st.spans += spans.len();
     let dl = d.length();
@@ -429,7 +419,7 @@ pub fn check_spans(
 }
 
 pub fn to_ray(o: DVec3, d: DVec3) -> Ray {
-    Ray { origin: o.as_vec3(), dir: d.as_vec3(), tmin: 0.0, tmax: f32::INFINITY }
+    Ray::new(o.as_vec3(), d.as_vec3())
 }
 
 /// Eight rays from `o` spread around `d` like a 4x2 block of pixels, `s` (of

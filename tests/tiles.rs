@@ -172,3 +172,82 @@ fn shadow_tiles_give_every_ray_the_whole_programs_answer() {
     println!("{rays} shadow rays, {blocked} blocked, {culled} sweeps meeting nothing");
     assert!(blocked > rays / 5 && culled > 50, "too few blocked rays or culled sweeps to test");
 }
+
+/// Many objects: tiles that list their objects (at most `OBJECT_LIST`
+/// bounded ones) and tiles that meet more and walk the objects' tree give
+/// every ray the whole program's answer, ties between objects included
+/// (exact copies of earlier objects, whose surfaces meet every ray at the
+/// same t).
+#[test]
+fn tiles_of_many_objects_keep_ties_between_objects() {
+    let (mut rays, mut hits, mut listed, mut walked) = (0u64, 0u64, 0u64, 0u64);
+    for seed in 0..6u64 {
+        let seed = 0x0b1ec7 + seed;
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..6 {
+            let n = rng.gen_range(20..90);
+            let mut trees: Vec<Shape> = (0..n)
+                .map(|_| {
+                    let c = rp(&mut rng, 1.5);
+                    let s = match rng.gen_range(0..4) {
+                        0 => Shape::Sphere { c, r: rng.gen_range(0.05..0.4) },
+                        1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.5)) },
+                        2 => random_tree(&mut rng, 1),
+                        _ => random_leaf(&mut rng, true),
+                    };
+                    if rng.gen_bool(0.3) {
+                        random_xf(&mut rng, s)
+                    } else {
+                        s
+                    }
+                })
+                .collect();
+            for _ in 0..n / 5 {
+                let k = rng.gen_range(0..trees.len());
+                let twin = trees[k].clone();
+                let at = rng.gen_range(0..=trees.len());
+                trees.insert(at, twin);
+            }
+            if rng.gen_bool(0.5) {
+                trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.2 });
+            }
+            let scene = bake(&trees);
+            let mut ps = PacketScratch::default();
+            let mut ts = TileScratch::default();
+            for t in 0..16 {
+                let (o, d) = random_ray(&mut rng);
+                let d = d.normalize();
+                let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
+                let (a, b) = if t % 2 == 0 { (0.6, 0.5) } else { (rng.gen_range(0.01..0.1), rng.gen_range(0.01..0.1)) };
+                let e = [d + u * a + v * b, d - u * a + v * b, d - u * a - v * b, d + u * a - v * b];
+                let region = Frustum::pyramid(o.as_vec3(), e.map(|x| x.as_vec3()));
+                if !scene.prepare_tile(&region, &mut ts) {
+                    continue;
+                }
+                let view = ts.view();
+                if view.lists_objects() {
+                    listed += 1;
+                } else {
+                    walked += 1;
+                }
+                let packet: Vec<Ray> = (0..8)
+                    .map(|_| {
+                        let (s, w) = (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0));
+                        let dir = (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w;
+                        to_ray(o, dir)
+                    })
+                    .collect();
+                let mut out = [None; 8];
+                scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
+                for k in 0..8 {
+                    let one = scene.intersect(&packet[k]);
+                    hits += one.is_some() as u64;
+                    assert_eq!(key(out[k]), key(one), "seed {seed:#x} case {case} tile {t} ray {k}: {:?}", packet[k]);
+                    rays += 1;
+                }
+            }
+        }
+    }
+    println!("{rays} rays, {hits} hits; tiles listing their objects {listed}, walking the tree {walked}");
+    assert!(listed > 20 && walked > 20 && hits > rays / 4, "both kinds of tile and enough hits are needed to test");
+}

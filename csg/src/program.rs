@@ -9,7 +9,7 @@ use rothray_primitives::{
     bvh::FlatBvh,
     polytope::{polytope_box, Plane},
     table::push_clipped,
-    Aabb, LeafKind, LeafTable, Span, SpanSink, Surf,
+    Aabb, LeafKind, LeafTable, Ray, Span, SpanSink, Surf,
 };
 
 use crate::counts;
@@ -83,15 +83,12 @@ pub struct Program {
     pub id: u64,
 }
 
-/// Per-ray constants.
+/// Per-ray constants of an evaluation: the ray (its range is the range
+/// evaluated), the fusing tolerance, and the packet memo.
 #[derive(Clone, Copy, Debug)]
 pub struct RayCtx<'a> {
-    /// Origin.
-    pub o: Vec3,
-    /// Direction (not normalised; t is in its units).
-    pub d: Vec3,
-    /// `1 / d` per component.
-    pub inv_d: Vec3,
+    /// The ray and the range evaluated.
+    pub ray: Ray,
     /// Fusing tolerance in units of t.
     pub eps: f32,
     /// Leaf results computed ahead by a packet query, and this ray's lane in it.
@@ -101,12 +98,18 @@ pub struct RayCtx<'a> {
 impl RayCtx<'static> {
     /// A ray context; `eps_world` is the scene's length tolerance.
     #[inline]
-    pub fn new(o: Vec3, d: Vec3, eps_world: f32) -> Self {
-        RayCtx { o, d, inv_d: d.recip(), eps: eps_world / d.length(), memo: None }
+    pub fn new(ray: Ray, eps_world: f32) -> Self {
+        RayCtx { ray, eps: eps_world / ray.dir.length(), memo: None }
     }
 }
 
 impl RayCtx<'_> {
+    /// The same ray and tolerance evaluated over `[tmin, tmax]`.
+    #[inline(always)]
+    pub fn with_range(&self, tmin: f32, tmax: f32) -> Self {
+        RayCtx { ray: self.ray.with_range(tmin, tmax), ..*self }
+    }
+
     /// The slack of a leaf query in [`Mode::Nearest`] for a ray of tolerance
     /// `eps` (what [`RayCtx::nearest_slack`] gives it; for packet queries made
     /// before the contexts).
@@ -228,7 +231,7 @@ impl PacketMemo {
         }
         let end = hi.min(v);
         for s in &e.spans[k] {
-            push_clipped(out, s.t0, s.s0, s.t1, s.s1, lo, end);
+            push_clipped(out, *s, lo, end);
         }
         Some(if v >= hi { f32::INFINITY } else { v })
     }
@@ -250,15 +253,37 @@ impl<'a> MemoLanes<'a> {
 
 /// A leaf's query, from the ray's packet memo when it has the answer.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn leaf_spans<S: SpanSink + ?Sized>(leaves: &LeafTable, ray: &RayCtx, i: u32, lo: f32, hi: f32, nearest: Option<f32>, out: &mut S) -> f32 {
+fn leaf_spans<S: SpanSink + ?Sized>(
+    leaves: &LeafTable,
+    ctx: &RayCtx,
+    i: u32,
+    (lo, hi): (f32, f32),
+    nearest: Option<f32>,
+    out: &mut S,
+) -> f32 {
     counts::leaf();
-    if let (Some((memo, k)), Some(_)) = (ray.memo, nearest) {
+    if let (Some((memo, k)), Some(_)) = (ctx.memo, nearest) {
         if let Some(v) = memo.serve(k, i, lo, hi, out) {
             return v;
         }
     }
-    leaves.spans_for(i, ray.o, ray.d, lo, hi, nearest, out)
+    leaves.spans_for(i, &ctx.ray.with_range(lo, hi), nearest, out)
+}
+
+/// What a frameless evaluation reads: the leaves, the ray and the mode.
+#[derive(Clone, Copy)]
+struct Ask<'a, 'm> {
+    leaves: &'a LeafTable,
+    ctx: &'a RayCtx<'m>,
+    mode: Mode,
+}
+
+/// The span lists a frameless evaluation works in: one leaf's spans,
+/// `combine`'s scratch, and the result.
+struct Lists<'s> {
+    leaf: &'s mut SpanList,
+    tmp: &'s mut SpanList,
+    acc: &'s mut SpanList,
 }
 
 struct Frame {
@@ -296,6 +321,9 @@ pub struct Scratch {
     pub out: SpanList,
     /// Point-classification values (post-order).
     bools: Vec<bool>,
+    /// A caller's candidate list, `(entry t, id)` (the engine's objects along
+    /// a ray), kept here so that it too is reused from ray to ray.
+    pub cands: Vec<(f32, u32)>,
 }
 
 /// Builds a [`Program`] bottom-up.
@@ -485,27 +513,28 @@ impl Program {
     /// within a few eps of that limit is not sure: an operand cut short there
     /// ends its span with no surface, and `combine` may fuse that end with a
     /// real boundary of another operand.
-    #[allow(clippy::too_many_arguments)] // until one `Ray` type carries o, d, tmin, tmax (issue 11)
-    pub fn eval(&self, leaves: &LeafTable, root: u32, ray: &RayCtx, tmin: f32, tmax: f32, mode: Mode, scratch: &mut Scratch) -> f32 {
+    pub fn eval(&self, leaves: &LeafTable, root: u32, ctx: &RayCtx, mode: Mode, scratch: &mut Scratch) -> f32 {
+        let (tmin, tmax) = (ctx.ray.tmin, ctx.ray.tmax);
         scratch.out.clear();
         if self.kind[root as usize] == NodeKind::Leaf {
-            let v = leaf_spans(leaves, ray, self.first[root as usize], tmin, tmax, ray.nearest(mode), &mut scratch.out);
+            let v = leaf_spans(leaves, ctx, self.first[root as usize], (tmin, tmax), ctx.nearest(mode), &mut scratch.out);
             return v.min(tmax);
         }
         let r = root as usize;
-        if self.bounds[r].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
+        if self.bounds[r].ray_range(ctx.ray.origin, ctx.ray.inv_dir, tmin, tmax).is_none() {
             return tmax;
         }
+        let ask = Ask { leaves, ctx, mode };
         if self.frameless(r) {
             let Scratch { out, leaf, tmp, .. } = scratch;
-            return self.eval_frameless(r, ray, tmin, tmax, mode, leaves, leaf, tmp, out).min(tmax);
+            return self.eval_frameless(r, ask, (tmin, tmax), Lists { leaf, tmp, acc: out }).min(tmax);
         }
         let base = scratch.frames.len();
-        self.push_frame(root, tmin, tmax, ray, mode, scratch);
+        self.push_frame(root, (tmin, tmax), ctx, mode, scratch);
         loop {
             // Pick the next child of the top frame.
             let top = scratch.frames.len() - 1;
-            let child = self.next_child(top, ray, scratch);
+            let child = self.next_child(top, ctx, scratch);
             match child {
                 Some(c) => {
                     let f = &scratch.frames[top];
@@ -516,21 +545,22 @@ impl Program {
                         leaf.clear();
                         // A leaf's spans are exact on the range it was asked for (up to
                         // `v` in nearest mode).
-                        let v = leaf_spans(leaves, ray, self.first[c as usize], ct0, ct1, ray.nearest(mode), leaf);
-                        self.absorb(&mut frames[top], &mut accs[top], tmp, leaf.as_slice(), v, ray);
+                        let v = leaf_spans(leaves, ctx, self.first[c as usize], (ct0, ct1), ctx.nearest(mode), leaf);
+                        self.absorb(&mut frames[top], &mut accs[top], tmp, (leaf.as_slice(), v), ctx.eps);
                     } else if self.frameless(c as usize) {
                         // Bottom-level inner node: evaluate in place, no frame.
                         let cu = c as usize;
                         let Scratch { frames, accs, tmp, leaf, sub, .. } = scratch;
                         sub.clear();
-                        let valid = if self.bounds[cu].ray_range(ray.o, ray.inv_d, ct0, ct1).is_none() {
+                        let valid = if self.bounds[cu].ray_range(ctx.ray.origin, ctx.ray.inv_dir, ct0, ct1).is_none() {
                             f32::INFINITY
                         } else {
-                            self.eval_frameless(cu, ray, ct0, ct1, mode, leaves, leaf, tmp, sub)
+                            let ask = Ask { leaves, ctx, mode };
+                            self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub })
                         };
-                        self.absorb(&mut frames[top], &mut accs[top], tmp, sub.as_slice(), valid, ray);
+                        self.absorb(&mut frames[top], &mut accs[top], tmp, (sub.as_slice(), valid), ctx.eps);
                     } else {
-                        self.push_frame(c, ct0, ct1, ray, mode, scratch);
+                        self.push_frame(c, (ct0, ct1), ctx, mode, scratch);
                     }
                 }
                 None => {
@@ -546,9 +576,8 @@ impl Program {
                         &mut scratch.frames[depth - 1],
                         &mut parents[depth - 1],
                         &mut scratch.tmp,
-                        rest[0].as_slice(),
-                        f.valid,
-                        ray,
+                        (rest[0].as_slice(), f.valid),
+                        ctx.eps,
                     );
                     rest[0].clear();
                 }
@@ -573,7 +602,7 @@ impl Program {
         }
     }
 
-    fn push_frame(&self, node: u32, tmin: f32, tmax: f32, ray: &RayCtx, mode: Mode, scratch: &mut Scratch) {
+    fn push_frame(&self, node: u32, (tmin, tmax): (f32, f32), ctx: &RayCtx, mode: Mode, scratch: &mut Scratch) {
         let mut frame = Frame {
             node,
             next: 0,
@@ -592,11 +621,11 @@ impl Program {
         }
         scratch.accs[depth].clear();
         let n = node as usize;
-        if self.bounds[n].ray_range(ray.o, ray.inv_d, tmin, tmax).is_none() {
+        if self.bounds[n].ray_range(ctx.ray.origin, ctx.ray.inv_dir, tmin, tmax).is_none() {
             frame.done = true;
         } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX {
             let lo = scratch.cand.len();
-            self.collect(n, 0, ray, tmin, tmax, scratch);
+            self.collect(n, 0, ctx, (tmin, tmax), scratch);
             frame.cand_lo = lo as u32;
             frame.cand_hi = scratch.cand.len() as u32;
         }
@@ -612,43 +641,21 @@ impl Program {
 
     /// Evaluates a [`Program::frameless`] node into `acc`; returns where the result
     /// stops being exact.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn eval_frameless(
-        &self,
-        n: usize,
-        ray: &RayCtx,
-        tmin: f32,
-        tmax: f32,
-        mode: Mode,
-        leaves: &LeafTable,
-        leaf: &mut SpanList,
-        tmp: &mut SpanList,
-        acc: &mut SpanList,
-    ) -> f32 {
+    fn eval_frameless(&self, n: usize, ask: Ask, range: (f32, f32), lists: Lists) -> f32 {
         if self.wide[n] == u32::MAX {
-            self.leaf_node(n, ray, tmin, tmax, mode, leaves, leaf, tmp, acc)
+            self.leaf_node(n, ask, range, lists)
         } else {
-            self.leaf_union(n, ray, tmin, tmax, mode, leaves, leaf, tmp, acc)
+            self.leaf_union(n, ask, range, lists)
         }
     }
 
     /// A narrow node whose operands are all leaves, in one loop with the same
     /// early outs as the general path (measured on `scenes/logo`, whose two inner
     /// nodes are like this: frames and their copies were ~40% of the trace time).
-    #[allow(clippy::too_many_arguments)]
-    fn leaf_node(
-        &self,
-        n: usize,
-        ray: &RayCtx,
-        tmin: f32,
-        tmax: f32,
-        mode: Mode,
-        leaves: &LeafTable,
-        leaf: &mut SpanList,
-        tmp: &mut SpanList,
-        acc: &mut SpanList,
-    ) -> f32 {
+    fn leaf_node(&self, n: usize, ask: Ask, (tmin, tmax): (f32, f32), lists: Lists) -> f32 {
+        let Ask { leaves, ctx, mode } = ask;
+        let Lists { leaf, tmp, acc } = lists;
         let kind = self.kind[n];
         let op = kind.op();
         let (first, count) = (self.first[n] as usize, self.count[n] as usize);
@@ -660,14 +667,14 @@ impl Program {
             // No box test first: for a leaf the kernel is about as cheap, and a miss
             // gives no span, which has the same effect (measured with callgrind on
             // scenes/logo: the box tests were ~8% of the instructions).
-            let nearest = ray.nearest(self.child_mode(n, k as u32 + 1, mode));
+            let nearest = ctx.nearest(self.child_mode(n, k as u32 + 1, mode));
             let v = if k == 0 || (kind == NodeKind::Union && acc.is_empty()) {
-                leaf_spans(leaves, ray, self.first[c], lo, hi, nearest, acc)
+                leaf_spans(leaves, ctx, self.first[c], (lo, hi), nearest, acc)
             } else {
                 leaf.clear();
-                let v = leaf_spans(leaves, ray, self.first[c], lo, hi, nearest, leaf);
+                let v = leaf_spans(leaves, ctx, self.first[c], (lo, hi), nearest, leaf);
                 if !leaf.is_empty() {
-                    combine_into(op, acc, leaf.as_slice(), ray.eps, tmp);
+                    combine_into(op, acc, leaf.as_slice(), ctx.eps, tmp);
                 } else if op == Op::Intersection {
                     acc.clear();
                 } // else: an empty union operand or subtrahend changes nothing
@@ -682,7 +689,7 @@ impl Program {
             match kind {
                 NodeKind::Union => {
                     if mode != Mode::All {
-                        if let Some(t) = stop_at_first_entry(acc, hi, mode, ray.eps) {
+                        if let Some(t) = stop_at_first_entry(acc, hi, mode, ctx.eps) {
                             hi = t;
                             valid = t;
                         }
@@ -704,19 +711,9 @@ impl Program {
 
     /// A wide union of leaves in one front-to-back BVH walk. In nearest mode the
     /// range shrinks to the first confirmed entry, which prunes the rest of the walk.
-    #[allow(clippy::too_many_arguments)]
-    fn leaf_union(
-        &self,
-        n: usize,
-        ray: &RayCtx,
-        tmin: f32,
-        tmax: f32,
-        mode: Mode,
-        leaves: &LeafTable,
-        leaf: &mut SpanList,
-        tmp: &mut SpanList,
-        acc: &mut SpanList,
-    ) -> f32 {
+    fn leaf_union(&self, n: usize, ask: Ask, (tmin, tmax): (f32, f32), lists: Lists) -> f32 {
+        let Ask { leaves, ctx, mode } = ask;
+        let Lists { leaf, tmp, acc } = lists;
         let w = self.wide_of(n);
         let first = self.first[n];
         // `hi`: the working range's end; `valid`: where the result stops being exact.
@@ -726,7 +723,7 @@ impl Program {
             counts::wide_child();
             let c = self.children[(first + pos) as usize];
             leaf.clear();
-            let v = leaf_spans(leaves, ray, self.first[c as usize], tmin, *hi, ray.nearest(mode), leaf);
+            let v = leaf_spans(leaves, ctx, self.first[c as usize], (tmin, *hi), ctx.nearest(mode), leaf);
             if v < *valid {
                 *valid = v;
                 *hi = hi.min(v);
@@ -738,10 +735,10 @@ impl Program {
             if acc.is_empty() {
                 acc.0.extend_from_slice(leaf.as_slice());
             } else {
-                combine_into(Op::Union, acc, leaf.as_slice(), ray.eps, tmp);
+                combine_into(Op::Union, acc, leaf.as_slice(), ctx.eps, tmp);
             }
             if mode != Mode::All {
-                if let Some(t) = stop_at_first_entry(acc, *hi, mode, ray.eps) {
+                if let Some(t) = stop_at_first_entry(acc, *hi, mode, ctx.eps) {
                     *hi = t;
                     *valid = t;
                 }
@@ -750,7 +747,7 @@ impl Program {
         for &pos in &w.unbounded {
             visit(pos, acc, &mut hi, &mut valid);
         }
-        w.bvh.traverse(ray.o, ray.inv_d, tmin, hi, |pos, _| {
+        w.bvh.traverse(ctx.ray.origin, ctx.ray.inv_dir, tmin, hi, |pos, _| {
             visit(pos, acc, &mut hi, &mut valid);
             hi
         });
@@ -759,13 +756,14 @@ impl Program {
 
     /// Candidates of wide node `n` (children at positions >= `skip`) along `[tmin, tmax]`,
     /// sorted by box entry.
-    fn collect(&self, n: usize, skip: u32, ray: &RayCtx, tmin: f32, tmax: f32, scratch: &mut Scratch) {
+    fn collect(&self, n: usize, skip: u32, ctx: &RayCtx, (tmin, tmax): (f32, f32), scratch: &mut Scratch) {
+        let ray = &ctx.ray;
         let w = self.wide_of(n);
         let lo = scratch.cand.len();
         let cand = &mut scratch.cand;
-        w.bvh.traverse(ray.o, ray.inv_d, tmin, tmax, |pos, _| {
+        w.bvh.traverse(ray.origin, ray.inv_dir, tmin, tmax, |pos, _| {
             let c = self.children[(self.first[n] + pos) as usize];
-            if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.o, ray.inv_d, tmin, tmax) {
+            if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.origin, ray.inv_dir, tmin, tmax) {
                 cand.push((pos, t0));
                 counts::wide_child();
             }
@@ -786,7 +784,7 @@ impl Program {
     }
 
     /// The next child node to evaluate for frame `top`, or `None` when it is finished.
-    fn next_child(&self, top: usize, ray: &RayCtx, scratch: &mut Scratch) -> Option<u32> {
+    fn next_child(&self, top: usize, ctx: &RayCtx, scratch: &mut Scratch) -> Option<u32> {
         let f = &scratch.frames[top];
         if f.done {
             return None;
@@ -803,7 +801,7 @@ impl Program {
                     f.next = 2;
                     let (t0, t1) = (f.tmin, f.tmax);
                     let lo = scratch.cand.len() as u32;
-                    self.collect(n, 1, ray, t0, t1, scratch);
+                    self.collect(n, 1, ctx, (t0, t1), scratch);
                     let f = &mut scratch.frames[top];
                     f.cand_lo = lo;
                     f.cand_hi = scratch.cand.len() as u32;
@@ -826,7 +824,7 @@ impl Program {
             }
             let c = self.children[(first + f.next) as usize];
             f.next += 1;
-            if self.bounds[c as usize].ray_range(ray.o, ray.inv_d, f.tmin, f.tmax).is_none() {
+            if self.bounds[c as usize].ray_range(ctx.ray.origin, ctx.ray.inv_dir, f.tmin, f.tmax).is_none() {
                 // An empty child: the union skips it, the intersection is empty,
                 // the difference skips a subtrahend and ends on an empty positive.
                 match kind {
@@ -852,8 +850,7 @@ impl Program {
     }
 
     /// Folds a child's result into frame `top`.
-    #[allow(clippy::too_many_arguments)]
-    fn absorb(&self, f: &mut Frame, acc: &mut SpanList, tmp: &mut SpanList, r: &[Span], r_valid: f32, ray: &RayCtx) {
+    fn absorb(&self, f: &mut Frame, acc: &mut SpanList, tmp: &mut SpanList, (r, r_valid): (&[Span], f32), eps: f32) {
         let mode = f.mode;
         let kind = self.kind[f.node as usize];
         if r_valid < f.valid {
@@ -867,12 +864,12 @@ impl Program {
             acc.0.extend_from_slice(r);
             acc.truncate_at(f.tmax);
         } else {
-            combine_into(kind.op(), acc, r, ray.eps, tmp);
+            combine_into(kind.op(), acc, r, eps, tmp);
         }
         match kind {
             NodeKind::Union => {
                 if mode != Mode::All {
-                    if let Some(t) = stop_at_first_entry(acc, f.tmax, mode, ray.eps) {
+                    if let Some(t) = stop_at_first_entry(acc, f.tmax, mode, eps) {
                         f.valid = t;
                         f.tmax = t;
                     }

@@ -423,28 +423,19 @@ pub(crate) fn bake_objects(world: &World, roots: &[Entity], tolerance: f32) -> R
 pub fn bake_scene(world: &World, scene: &mut RenderScene) -> Result<(), BakeError> {
     let roots = find_objects(world);
     let baked = bake_objects(world, &roots, scene.tolerance_or_default())?;
-    install_baked(scene, baked, ObjectTrees::Static);
+    install_baked(scene, baked);
     Ok(())
 }
 
-/// Which object BVHs a scene gets.
-#[derive(Clone, Copy, PartialEq, Eq)]
-pub(crate) enum ObjectTrees {
-    /// obvhs' `CwBvh` (fastest to trace, cannot be refit).
-    Static,
-    /// Binary trees that [`crate::refit`] updates in place.
-    Live,
-}
-
 /// Moves baked tables into `scene` and builds what depends on all objects:
-/// the object BVHs, the packet paths, the scene's bounds and tolerance.
-pub(crate) fn install_baked(scene: &mut RenderScene, baked: Baked, trees: ObjectTrees) {
+/// the object tree, the packet paths, the scene's bounds and tolerance.
+pub(crate) fn install_baked(scene: &mut RenderScene, baked: Baked) {
     let Baked { leaves, leaf_info, objects, program, .. } = baked;
     scene.leaves = leaves;
     scene.program = program;
     scene.objects = objects;
     scene.leaf_info = leaf_info;
-    build_object_trees(scene, trees);
+    build_object_tree(scene);
     bake_packet_paths(scene);
     scene.redo_window = scene.objects.iter().map(|o| redo_window_of(&scene.program, &scene.leaves, o)).collect();
     let bounds = scene_bounds(scene);
@@ -464,9 +455,10 @@ pub(crate) fn redo_window_of(program: &Program, leaves: &LeafTable, o: &ObjectIn
     }
 }
 
-/// Builds the object BVH and the cull tree over the bounded objects, and
+/// Builds the objects' tree (binary: tiles cull with it, rays take their
+/// candidates from it, a live scene refits it) over the bounded objects, and
 /// lists the unbounded ones.
-pub(crate) fn build_object_trees(scene: &mut RenderScene, trees: ObjectTrees) {
+pub(crate) fn build_object_tree(scene: &mut RenderScene) {
     let mut boxes = Vec::new();
     let mut ids = Vec::new();
     let mut unbounded = Vec::new();
@@ -481,14 +473,10 @@ pub(crate) fn build_object_trees(scene: &mut RenderScene, trees: ObjectTrees) {
             unbounded.push(i as u32);
         }
     }
-    let (mut bvh, mut cull) = match trees {
-        ObjectTrees::Static => (FlatBvh::build(&boxes, 1), FlatBvh::build_cull(&boxes, 2)),
-        ObjectTrees::Live => (FlatBvh::build_binary(&boxes, 1), FlatBvh::build_cull(&boxes, 2)),
-    };
-    for p in bvh.prims.iter_mut().chain(cull.prims.iter_mut()) {
+    let mut cull = FlatBvh::build_cull(&boxes, 2);
+    for p in cull.prims.iter_mut() {
         *p = ids[*p as usize];
     }
-    scene.objects_bvh = bvh;
     scene.objects_cull = cull;
     scene.unbounded = unbounded;
 }
@@ -687,6 +675,7 @@ mod tests {
     use rand::{rngs::SmallRng, Rng, SeedableRng};
     use rothray_csg::{Mode, RayCtx, Scratch};
     use rothray_primitives::table::{LeafShape, Sphere};
+    use rothray_primitives::Ray;
 
     fn object() -> ObjectInfo {
         ObjectInfo { entity: Entity::DANGLING, name: String::new(), root: 0, bounds: Aabb::EMPTY }
@@ -758,10 +747,10 @@ mod tests {
             for _ in 0..50 {
                 let o = Vec3::new(rng.gen_range(-3.0..3.0), rng.gen_range(-3.0..3.0), 5.0);
                 let d = Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), -1.0);
-                let ctx = RayCtx::new(o, d, 1e-5);
+                let ctx = RayCtx::new(Ray::new(o, d), 1e-5);
                 for mode in [Mode::All, Mode::Nearest] {
-                    let va = pa.eval(&leaves, a[0].root, &ctx, 0.0, f32::INFINITY, mode, &mut sa);
-                    let vb = pb.eval(&leaves, b[0].root, &ctx, 0.0, f32::INFINITY, mode, &mut sb);
+                    let va = pa.eval(&leaves, a[0].root, &ctx, mode, &mut sa);
+                    let vb = pb.eval(&leaves, b[0].root, &ctx, mode, &mut sb);
                     assert_eq!(format!("{va:?} {:?}", sa.out.as_slice()), format!("{vb:?} {:?}", sb.out.as_slice()), "case {case}");
                 }
                 let p = o + d * rng.gen_range(0.0..8.0);

@@ -27,6 +27,7 @@
 #![warn(missing_docs)]
 
 pub mod bake;
+mod box_list;
 mod changes;
 pub mod components;
 mod entity_hash;

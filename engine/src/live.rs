@@ -21,8 +21,7 @@ use rothray_csg::{NodeKind, ProgramBuilder};
 use rothray_primitives::{Aabb, LeafKind, LeafTable};
 
 use crate::bake::{
-    bake_objects, build_object_trees, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, Baked,
-    ObjectTrees, Slice,
+    bake_objects, build_object_tree, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, Baked, Slice,
 };
 use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;
@@ -51,8 +50,8 @@ pub(crate) struct LiveState {
     owners: Owners,
     /// Root entity -> object index.
     index: EntityMap<u32>,
-    bvh: Refit,
-    cull: Refit,
+    /// Links of `RenderScene::objects_cull` for refits.
+    tree: Refit,
     /// Rows of objects that were re-baked elsewhere or are gone.
     dead_leaves: usize,
     tolerance: f32,
@@ -120,8 +119,8 @@ fn bake_all(world: &World, scene: &mut RenderScene, live: &mut LiveState, tolera
     live.dead_leaves = 0;
     live.tolerance = tolerance;
     live.counts.full += 1;
-    install_baked(scene, baked, ObjectTrees::Live);
-    link_object_trees(scene, live);
+    install_baked(scene, baked);
+    link_object_tree(scene, live);
     Ok(())
 }
 
@@ -153,12 +152,12 @@ fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, ch
     if changes.structural {
         place_objects(world, scene, live, &baked, &roots);
         live.counts.rebuilds += 1;
-        build_object_trees(scene, ObjectTrees::Live);
-        link_object_trees(scene, live);
+        build_object_tree(scene);
+        link_object_tree(scene, live);
         scene.redo_window = scene.objects.iter().map(|o| redo_window_of(&scene.program, &scene.leaves, o)).collect();
     } else {
         let moved = replace_objects(world, scene, live, &baked);
-        refit_object_trees(scene, live, &moved);
+        refit_object_tree(scene, live, &moved);
     }
     update_scene_bounds(scene);
     update_packet_paths(scene);
@@ -410,38 +409,35 @@ fn copy_nodes(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
     }
 }
 
-/// Links the freshly built object trees for refits.
-fn link_object_trees(scene: &mut RenderScene, live: &mut LiveState) {
+/// Links the freshly built object tree for refits.
+fn link_object_tree(scene: &mut RenderScene, live: &mut LiveState) {
     let objects = &scene.objects;
-    let n = objects.len();
-    live.bvh = Refit::new(&mut scene.objects_bvh, n, |p| objects[p as usize].bounds);
-    live.cull = Refit::new(&mut scene.objects_cull, n, |p| objects[p as usize].bounds);
+    live.tree = Refit::new(&mut scene.objects_cull, objects.len(), |p| objects[p as usize].bounds);
 }
 
-/// Refits the object trees over the objects whose bounds changed; rebuilds
-/// them when an object's box became or stopped being finite, or when they
-/// have degraded past [`REBUILD_AT`].
-fn refit_object_trees(scene: &mut RenderScene, live: &mut LiveState, moved: &[(u32, Aabb)]) {
+/// Refits the object tree over the objects whose bounds changed; rebuilds
+/// it when an object's box became or stopped being finite, or when it has
+/// degraded past [`REBUILD_AT`].
+fn refit_object_tree(scene: &mut RenderScene, live: &mut LiveState, moved: &[(u32, Aabb)]) {
     let bounded = |b: &Aabb| !b.is_empty() && b.is_finite();
     let objects = &scene.objects;
     let rebuild = moved.iter().any(|(oi, old)| bounded(old) != bounded(&objects[*oi as usize].bounds) || !bounded(old));
     if !rebuild {
         for &(oi, _) in moved {
-            live.bvh.update(&mut scene.objects_bvh, oi, |p| objects[p as usize].bounds);
-            live.cull.update(&mut scene.objects_cull, oi, |p| objects[p as usize].bounds);
+            live.tree.update(&mut scene.objects_cull, oi, |p| objects[p as usize].bounds);
         }
     }
-    if rebuild || live.bvh.degradation() > REBUILD_AT || live.cull.degradation() > REBUILD_AT {
+    if rebuild || live.tree.degradation() > REBUILD_AT {
         live.counts.rebuilds += 1;
-        build_object_trees(scene, ObjectTrees::Live);
-        link_object_trees(scene, live);
+        build_object_tree(scene);
+        link_object_tree(scene, live);
     }
 }
 
 /// The scene's bounds (hence its tolerance) from the refit tree's root: the
 /// same union of the finite objects' boxes that a fresh bake takes.
 fn update_scene_bounds(scene: &mut RenderScene) {
-    let bounds = if scene.objects_bvh.nodes.is_empty() { scene_bounds(scene) } else { scene.objects_bvh.bounds() };
+    let bounds = if scene.objects_cull.nodes.is_empty() { scene_bounds(scene) } else { scene.objects_cull.bounds() };
     set_scene_bounds(scene, bounds);
 }
 

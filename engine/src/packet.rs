@@ -120,6 +120,19 @@ fn reduce_to_leaf(program: &Program, n: u32, keep: u32) -> Reduced {
     }
 }
 
+/// What the packet knows of one lane before its own evaluation (for
+/// [`RenderScene::shortcut_hit`]).
+struct LaneKnown<'a, 'm> {
+    /// The packet meshes' records (as in `packet_meshes`).
+    lanes: &'a [Option<MemoLanes<'m>>; PACKET_MESHES],
+    /// Per cutter (see [`Shortcut::cutters`]) and lane, its first span.
+    cut_spans: &'a [Option<Span>],
+    /// Per cutter, the lanes whose `cut_spans` entry was made.
+    cut_done: &'a [u8],
+    /// The lane.
+    k: usize,
+}
+
 /// At most this many mesh leaves are traced ahead per packet; scenes with more
 /// go ray by ray.
 pub const PACKET_MESHES: usize = 4;
@@ -284,11 +297,8 @@ impl RenderScene {
             && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax);
         if !packet {
             for k in 0..n {
-                out[k] = if rays[k].is_valid() {
-                    self.intersect_ctx(&rays[k], &self.ray_ctx(rays[k].origin, rays[k].dir), &mut ps.scratch, normals, tile)
-                } else {
-                    None
-                };
+                out[k] =
+                    if rays[k].is_valid() { self.intersect_ctx(&self.ray_ctx(&rays[k]), &mut ps.scratch, normals, tile) } else { None };
             }
             return;
         }
@@ -304,7 +314,7 @@ impl RenderScene {
         // nearest-mode answer would be cut away there: with the crossings up to
         // the leaf's end, the evaluation needs no redo).
         let mut through = NO_THROUGH;
-        let inv_d: [Vec3; 8] = std::array::from_fn(|k| d[k].recip());
+        let inv_d: [Vec3; 8] = std::array::from_fn(|k| rays[k].inv_dir);
         if let Some(sc) = self.shortcut.as_ref().filter(|sc| !sc.cutters.is_empty()) {
             ps.cut_spans.resize(8 * sc.cutters.len(), None);
             ps.cut_done.resize(sc.cutters.len(), 0);
@@ -322,7 +332,7 @@ impl RenderScene {
                         continue;
                     }
                     let mut first = First(None);
-                    self.leaves.spans(l, o, d[k], tmin[k], tmax[k], &mut first);
+                    self.leaves.spans(l, &rays[k], &mut first);
                     ps.cut_spans[8 * ci + k] = first.0;
                     if let Some(f) = first.0 {
                         if f.t0 < through[k][0] {
@@ -365,20 +375,20 @@ impl RenderScene {
         for (j, &m) in self.packet_meshes.iter().enumerate() {
             lanes[j] = memo.lanes(m);
         }
-        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { o, d: d[k], inv_d: inv_d[k], eps: eps[k], memo: Some((memo, k)) });
+        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: Some((memo, k)) });
         for k in 0..8 {
             if left & (1 << k) == 0 {
                 continue;
             }
             if let Some(sc) = &self.shortcut {
-                let cut = (ps.cut_spans.as_slice(), ps.cut_done.as_slice());
-                if let Some(h) = self.shortcut_hit(sc, &rays[k], &ctx[k], &lanes, cut, k, normals) {
+                let known = LaneKnown { lanes: &lanes, cut_spans: &ps.cut_spans, cut_done: &ps.cut_done, k };
+                if let Some(h) = self.shortcut_hit(sc, &ctx[k], &known, normals) {
                     out[k] = h;
                     ps.shortcuts += 1;
                     continue;
                 }
             }
-            out[k] = self.intersect_ctx(&rays[k], &ctx[k], &mut ps.scratch, normals, tile);
+            out[k] = self.intersect_ctx(&ctx[k], &mut ps.scratch, normals, tile);
         }
     }
 
@@ -389,21 +399,13 @@ impl RenderScene {
         !self.packet_meshes.is_empty() && self.packet_cover.is_some()
     }
 
-    /// The nearest hit of packet lane `k` by the [`Shortcut`], when it applies
-    /// (`Some(None)`: no hit at all, every leaf is empty on the ray's range).
-    /// `cut`: the cutters' first spans made before the packet walk.
+    /// The nearest hit of packet lane `known.k` by the [`Shortcut`], when it
+    /// applies (`Some(None)`: no hit at all, every leaf is empty on the ray's
+    /// range).
     #[inline]
-    #[allow(clippy::too_many_arguments)]
-    fn shortcut_hit(
-        &self,
-        sc: &Shortcut,
-        ray: &Ray,
-        ctx: &RayCtx,
-        lanes: &[Option<MemoLanes>; PACKET_MESHES],
-        cut: (&[Option<Span>], &[u8]),
-        k: usize,
-        normals: bool,
-    ) -> Option<Option<Hit>> {
+    fn shortcut_hit(&self, sc: &Shortcut, ctx: &RayCtx, known: &LaneKnown, normals: bool) -> Option<Option<Hit>> {
+        let LaneKnown { lanes, cut_spans, cut_done, k } = *known;
+        let ray = &ctx.ray;
         // The nearest packet-mesh entry, and up to where each mesh is known empty.
         let mut best: Option<(f32, Surf, usize)> = None;
         let mut clear = [f32::INFINITY; PACKET_MESHES];
@@ -440,19 +442,19 @@ impl RenderScene {
         }
         for (i, (b, &l)) in sc.others.iter().zip(&sc.exact).enumerate() {
             let ci = sc.cutter_of[i] as usize;
-            if ci != u32::MAX as usize && cut.1[ci] & (1 << k) != 0 {
+            if ci != u32::MAX as usize && cut_done[ci] & (1 << k) != 0 {
                 // Its first span is known: any before `reach`?
-                if cut.0[8 * ci + k].is_some_and(|f| f.t0 < reach) {
+                if cut_spans[8 * ci + k].is_some_and(|f| f.t0 < reach) {
                     return None;
                 }
                 continue;
             }
-            if let Some((t0, _)) = b.ray_range(ctx.o, ctx.inv_d, ray.tmin, ray.tmax) {
+            if let Some((t0, _)) = b.ray_range(ray.origin, ray.inv_dir, ray.tmin, ray.tmax) {
                 if t0 <= reach {
                     // The box reaches the entry: does the leaf itself?
                     let mut first = First(None);
                     if l != u32::MAX {
-                        self.leaves.spans(l, ctx.o, ctx.d, ray.tmin, reach, &mut first);
+                        self.leaves.spans(l, &ray.with_range(ray.tmin, reach), &mut first);
                     }
                     if l == u32::MAX || first.0.is_some() {
                         return None;

@@ -234,7 +234,7 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
                 continue;
             }
             wk.shadows += 1;
-            let sr = Ray { origin: wk.origin[k], dir: to_l, tmin: 0.0, tmax: f32::INFINITY };
+            let sr = Ray::new(wk.origin[k], to_l);
             if !any || !scene.occluded_in(&sr, &mut wk.ps.scratch, Some(&view)) {
                 wk.light[k] += l.color * c;
             }

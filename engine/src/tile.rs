@@ -7,10 +7,16 @@
 use rothray_csg::{Program, TileCounts, TileProgram};
 use rothray_primitives::frustum::Frustum;
 
+use crate::box_list::BoxList;
 use crate::scene::RenderScene;
 
 /// Marks an object the tile's rays cannot meet.
 const NONE: u32 = u32::MAX;
+
+/// A tile that meets at most this many bounded objects lists them: its rays
+/// test those objects' boxes instead of walking the tree of all the scene's
+/// objects (see [`RenderScene::object_candidates`]).
+pub const OBJECT_LIST: usize = 32;
 
 /// Per-thread memory of the tile level, reused from tile to tile.
 #[derive(Default)]
@@ -20,6 +26,12 @@ pub struct TileScratch {
     root_of: Vec<u32>,
     /// The objects given a root in the current tile.
     live: Vec<u32>,
+    /// The bounded ones among them, by index, when there are at most
+    /// [`OBJECT_LIST`] (else empty, and `listed` is false).
+    bounded: Vec<u32>,
+    /// Their boxes, as the rays test them.
+    boxes: BoxList,
+    listed: bool,
     /// Program the tables above were made for.
     program_id: u64,
     /// Counts since the last [`TileScratch::take_counts`].
@@ -59,6 +71,8 @@ pub struct TileView<'a> {
     /// The baked program followed by the tile's specialised nodes.
     pub prog: &'a Program,
     root_of: &'a [u32],
+    /// The bounded objects the tile meets, when it lists them.
+    pub(crate) bounded: Option<&'a BoxList>,
 }
 
 impl TileView<'_> {
@@ -69,12 +83,18 @@ impl TileView<'_> {
         let r = self.root_of[oi as usize];
         (r != NONE).then_some(r)
     }
+
+    /// Do the tile's rays test a list of its objects' boxes (at most
+    /// [`OBJECT_LIST`] bounded objects), rather than walk the objects' tree?
+    pub fn lists_objects(&self) -> bool {
+        self.bounded.is_some()
+    }
 }
 
 impl TileScratch {
     /// The view of the tile last prepared.
     pub fn view(&self) -> TileView<'_> {
-        TileView { prog: &self.tp.prog, root_of: &self.root_of }
+        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(&self.boxes) }
     }
 
     /// The counts so far, reset.
@@ -101,7 +121,7 @@ impl RenderScene {
             ts.root_of[oi as usize] = NONE;
         }
         ts.live.clear();
-        let TileScratch { tp, root_of, live, counts, .. } = ts;
+        let TileScratch { tp, root_of, live, .. } = ts;
         let mut keep = |oi: u32| {
             let o = &self.objects[oi as usize];
             if let Some(r) = tp.specialise(&self.program, &self.leaves, o.root, region) {
@@ -113,6 +133,19 @@ impl RenderScene {
             keep(oi);
         }
         self.objects_cull().cull(|b| region.touches_box(b), &mut keep);
+        // The unbounded objects kept come first.
+        let unbounded = ts.live.iter().take_while(|&&oi| !self.objects[oi as usize].bounds.is_finite()).count();
+        ts.bounded.clear();
+        ts.listed = ts.live.len() - unbounded <= OBJECT_LIST;
+        if ts.listed {
+            ts.bounded.extend_from_slice(&ts.live[unbounded..]);
+            ts.bounded.sort_unstable();
+        }
+        ts.boxes.clear();
+        for &oi in &ts.bounded {
+            ts.boxes.push(&self.objects[oi as usize].bounds, oi);
+        }
+        let TileScratch { live, counts, .. } = ts;
         counts.tiles += 1;
         counts.objects_kept += live.len() as u64;
         if live.is_empty() {

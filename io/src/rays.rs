@@ -56,5 +56,5 @@ fn parse_line(l: &str) -> Result<Ray, String> {
     if tmin > tmax {
         return Err(format!("tmin {tmin} is above tmax {tmax}"));
     }
-    Ok(Ray { origin: o, dir: d, tmin, tmax })
+    Ok(Ray::segment(o, d, tmin, tmax))
 }

@@ -79,7 +79,7 @@ use crate::{
     bvh::FlatBvh,
     poly::{bern_roots, cubic_range, roots_bern, roots_in_tol, to_bernstein},
     sweep::{f32_down, f32_up, push_union_slack, BVH_MIN_SEGMENTS},
-    ShapeError, SpanSink,
+    Ray, ShapeError, SpanSink,
 };
 
 /// Default [`GenCylData::new`] tolerance.
@@ -512,8 +512,8 @@ impl GenCylData {
     /// Pushes the spans of `o + t d` inside the solid, clipped to `[tmin, tmax]`,
     /// sorted and disjoint; real crossings carry `Surf::new(leaf, seg << 2 | kind)`
     /// (kinds in [`sub`]).
-    pub fn spans<S: SpanSink + ?Sized>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, leaf: u32, out: &mut S) {
-        let inv = d.recip();
+    pub fn spans<S: SpanSink + ?Sized>(&self, ray: &Ray, leaf: u32, out: &mut S) {
+        let Ray { origin: o, dir: d, inv_dir: inv, tmin, tmax } = *ray;
         if self.bounds.ray_range(o, inv, tmin, tmax).is_none() {
             return;
         }
@@ -1164,7 +1164,7 @@ mod tests {
                 let pad = 0.01 * size / d.length();
                 let (t0, t1) = (ta as f64 - pad, tb as f64 + pad);
                 let mut got: Vec<Span> = vec![];
-                g.spans(of, df, t0 as f32, t1 as f32, 0, &mut got);
+                g.spans(&Ray::segment(of, df, t0 as f32, t1 as f32), 0, &mut got);
                 for w in got.windows(2) {
                     assert!(w[0].t1 < w[1].t0, "{name}: not sorted/disjoint {got:?}");
                 }
@@ -1213,7 +1213,7 @@ mod tests {
                 let v = rand_unit(&mut rng) * rng.gen_range(0.3..3.0);
                 let (o, d) = ((c - v * 3.0).as_vec3(), v.as_vec3());
                 let mut got: Vec<Span> = vec![];
-                g.spans(o, d, -1e9, 1e9, 0, &mut got);
+                g.spans(&Ray::segment(o, d, -1e9, 1e9), 0, &mut got);
                 let lo = inv.transform_point3(o.as_dvec3()).as_vec3();
                 let ld = inv.transform_vector3(d.as_dvec3()).as_vec3();
                 match kernels::cylinder(lo, ld) {
@@ -1265,7 +1265,7 @@ mod tests {
             let v = rand_unit(&mut rng) * rng.gen_range(0.3..3.0);
             let (o, d) = ((c - v * 3.0).as_vec3(), v.as_vec3());
             let mut got: Vec<Span> = vec![];
-            g.spans(o, d, -1e9, 1e9, 0, &mut got);
+            g.spans(&Ray::segment(o, d, -1e9, 1e9), 0, &mut got);
             match kernels::cuboid(o, d, mn, mx) {
                 Some((t0, _, t1, _)) if (t1 - t0) as f64 * v.length() > 1e-4 * size => {
                     hits += 1;
@@ -1309,8 +1309,8 @@ mod tests {
             let o = (f.c + nrm * (r as f64) - v * 2.0).as_vec3();
             let d = v.as_vec3();
             let (mut a, mut b): (Vec<Span>, Vec<Span>) = (vec![], vec![]);
-            g.spans(o, d, 0.0, 1e9, 0, &mut a);
-            sw.spans(o, d, 0.0, 1e9, 0, &mut b);
+            g.spans(&Ray::segment(o, d, 0.0, 1e9), 0, &mut a);
+            sw.spans(&Ray::segment(o, d, 0.0, 1e9), 0, &mut b);
             let (Some(a0), Some(b0)) = (a.first(), b.first()) else { continue };
             if a0.s0.sub & 3 != sub::SIDE {
                 continue;
@@ -1347,7 +1347,7 @@ mod tests {
                 let tgt = b.min.as_dvec3() + (b.max - b.min).as_dvec3() * DVec3::new(rng.gen(), rng.gen(), rng.gen());
                 let (o, d) = (o.as_vec3(), (tgt - o).as_vec3());
                 let mut got: Vec<Span> = vec![];
-                g.spans(o, d, 0.0, 10.0, 0, &mut got);
+                g.spans(&Ray::segment(o, d, 0.0, 10.0), 0, &mut got);
                 for (k, s) in got.iter().enumerate() {
                     if (s.t1 - s.t0) * d.length() > 1e-4 * size {
                         assert!(g.contains(o + d * (0.5 * (s.t0 + s.t1))), "{name}: span midpoint outside {s:?}");
@@ -1418,7 +1418,7 @@ mod tests {
                 for k in 0..50 {
                     let o = Vec3::new(-1.0 + 0.1 * k as f32, 3.0, 0.3);
                     let mut got: Vec<Span> = vec![];
-                    g.spans(o, Vec3::new(0.3, -1.0, 0.1), 0.0, 100.0, 0, &mut got);
+                    g.spans(&Ray::segment(o, Vec3::new(0.3, -1.0, 0.1), 0.0, 100.0), 0, &mut got);
                     assert!(got.iter().all(|s| s.t0.is_finite() && s.t1.is_finite()));
                 }
             }
@@ -1435,7 +1435,7 @@ mod tests {
         let g = GenCylData::new(&gc(&ARC, Profile::Circle(0.2), Frame::RotationMinimizing, 0.0), DEFAULT_TOLERANCE).unwrap();
         let p = g.frame_at(0, 0.5).c.as_vec3();
         let mut got: Vec<Span> = vec![];
-        g.spans(p + Vec3::Z * 2.0, -Vec3::Z, 0.0, 10.0, 0, &mut got);
+        g.spans(&Ray::segment(p + Vec3::Z * 2.0, -Vec3::Z, 0.0, 10.0), 0, &mut got);
         println!("{got:?}");
         assert_eq!(got.len(), 1);
         assert!((got[0].t0 - 1.8).abs() < 1e-5 && (got[0].t1 - 2.2).abs() < 1e-5);
@@ -1492,7 +1492,7 @@ mod tests {
                 let mut hits = 0;
                 for d in &rays {
                     let mut v: Vec<Span> = vec![];
-                    g.spans(eye, *d, 0.0, f32::INFINITY, 0, &mut v);
+                    g.spans(&Ray::segment(eye, *d, 0.0, f32::INFINITY), 0, &mut v);
                     hits += (!v.is_empty()) as usize;
                 }
                 let ns = t.elapsed().as_secs_f64() * 1e9 / rays.len() as f64;

@@ -25,11 +25,13 @@ pub mod kernels;
 pub mod mesh;
 pub mod poly;
 pub mod polytope;
+pub mod ray;
 pub mod sweep;
 pub mod table;
 
 pub use aabb::Aabb;
 pub use glam;
+pub use ray::Ray;
 pub use table::{Cone, Cuboid, Cylinder, HalfSpace, LeafError, LeafKind, LeafShape, LeafTable, ShapeError, Sphere, Torus};
 
 /// Identifies the surface a span boundary lies on: a leaf (index, with

@@ -27,7 +27,7 @@
 //! rule). So exactly one of the triangles that tile a neighbourhood of an edge or
 //! vertex reports the crossing: rays never leak through, nor count a crossing twice.
 
-use crate::Span;
+use crate::{Ray, Span};
 use std::collections::HashMap;
 use std::fmt;
 use std::mem::MaybeUninit;
@@ -814,7 +814,7 @@ impl MeshData {
         loop {
             if cur & wide::LEAF != 0 {
                 let blk = self.wide.block(cur);
-                self.leaf_nearest(blk, &r, &r4, tmin, &mut thi, &mut best);
+                self.leaf_nearest(blk, (&r, &r4), tmin, &mut thi, &mut best);
             } else {
                 let n = self.wide.node(cur);
                 let (m, tn) = rb.hit(n, tmin, thi);
@@ -840,7 +840,14 @@ impl MeshData {
     /// at `t <= *thi` becomes `best` and the new `*thi` (so on equal `t` the
     /// later triangle wins, in every walk alike).
     #[inline(always)]
-    fn leaf_nearest(&self, blk: &wide::TriBlock, r: &WoopRay, r4: &wide::TriRay4, tmin: f32, thi: &mut f32, best: &mut Option<(f32, u32)>) {
+    fn leaf_nearest(
+        &self,
+        blk: &wide::TriBlock,
+        (r, r4): (&WoopRay, &wide::TriRay4),
+        tmin: f32,
+        thi: &mut f32,
+        best: &mut Option<(f32, u32)>,
+    ) {
         match blk.nearest(r4, tmin, *thi) {
             wide::Near::Miss => {}
             wide::Near::Hit(t, l) => {
@@ -998,7 +1005,7 @@ impl MeshData {
                     }
                     // SAFETY: written above (bit k of `ready`).
                     let (r, r4) = unsafe { rays[k].assume_init_ref() };
-                    self.leaf_nearest(blk, r, r4, tmin[k], &mut thi.0[k], &mut best[k]);
+                    self.leaf_nearest(blk, (r, r4), tmin[k], &mut thi.0[k], &mut best[k]);
                 }
             } else {
                 let n = self.wide.node(cur);
@@ -1054,7 +1061,8 @@ impl MeshData {
     /// `[tmin, tmax]` (sorted, disjoint; clipped ends carry [`Surf::NONE`]). Span ends
     /// carry `Surf { leaf, sub }` with `sub` = triangle slot, `| SUB_FLIP` when the
     /// triangle faces inward there.
-    pub fn spans<S: SpanSink + ?Sized>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, leaf: u32, out: &mut S) {
+    pub fn spans<S: SpanSink + ?Sized>(&self, ray: &Ray, leaf: u32, out: &mut S) {
+        let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         if !(tmax >= tmin) {
             return;
         }
@@ -1065,7 +1073,7 @@ impl MeshData {
                     // The count at tmin is zero: only the crossings up to tmax matter.
                     self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, tmin, tmax, leaf, out);
+                    self.walk_signed(&xs, 0, (tmin, tmax), leaf, out);
                     return;
                 }
                 // Collect to the box exit: the crossings past tmax tell how deep inside
@@ -1073,7 +1081,7 @@ impl MeshData {
                 self.for_each_crossing(o, d, tmin, f32::INFINITY, |c| xs.push(c));
                 self.sort_signed(&mut xs);
                 let count: i32 = xs.iter().map(|c| -self.sign(c)).sum();
-                self.walk_signed(&xs, count, tmin, tmax, leaf, out);
+                self.walk_signed(&xs, count, (tmin, tmax), leaf, out);
             }
             InsideRule::Winding => {
                 let Some(&root) = self.bvh.nodes.first() else { return };
@@ -1112,7 +1120,7 @@ impl MeshData {
                                     Some(c) => self.surf(leaf, &c, false),
                                     None => Surf::NONE,
                                 };
-                                push_clipped(out, start.0, start.1, prev.0, s1, tmin, tmax);
+                                push_clipped(out, Span { t0: start.0, s0: start.1, t1: prev.0, s1 }, tmin, tmax);
                             }
                             inside = now;
                         }
@@ -1120,7 +1128,7 @@ impl MeshData {
                     prev = (t_end, cross);
                 }
                 if inside {
-                    push_clipped(out, start.0, start.1, hi, end_surf(hi, tmax), tmin, tmax);
+                    push_clipped(out, Span { t0: start.0, s0: start.1, t1: hi, s1: end_surf(hi, tmax) }, tmin, tmax);
                 }
             }
         }
@@ -1145,7 +1153,7 @@ impl MeshData {
 
     /// Spans of sorted signed crossings, given the winding count at `tmin`,
     /// clipped to `[tmin, tmax]`.
-    fn walk_signed<S: SpanSink + ?Sized>(&self, xs: &[Crossing], mut count: i32, tmin: f32, tmax: f32, leaf: u32, out: &mut S) {
+    fn walk_signed<S: SpanSink + ?Sized>(&self, xs: &[Crossing], mut count: i32, (tmin, tmax): (f32, f32), leaf: u32, out: &mut S) {
         let mut start = (tmin, Surf::NONE);
         for c in xs {
             if c.t > tmax {
@@ -1155,12 +1163,12 @@ impl MeshData {
             if count <= 0 && next > 0 {
                 start = (c.t, self.surf(leaf, c, true));
             } else if count > 0 && next <= 0 {
-                push_clipped(out, start.0, start.1, c.t, self.surf(leaf, c, false), tmin, tmax);
+                push_clipped(out, Span { t0: start.0, s0: start.1, t1: c.t, s1: self.surf(leaf, c, false) }, tmin, tmax);
             }
             count = next;
         }
         if count > 0 {
-            push_clipped(out, start.0, start.1, tmax, Surf::NONE, tmin, tmax);
+            push_clipped(out, Span { t0: start.0, s0: start.1, t1: tmax, s1: Surf::NONE }, tmin, tmax);
         }
     }
 
@@ -1171,13 +1179,13 @@ impl MeshData {
     /// exact on `[tmin, v]` (none lies past it) and `v` is returned. Falls back to
     /// the full query (returning infinity) where the count at `tmin` is not known
     /// to be zero (the point at `tmin` inside the bounds) or for the winding rule.
-    #[allow(clippy::too_many_arguments)] // until one `Ray` type carries o, d, tmin, tmax (issue 11)
-    pub fn spans_nearest<S: SpanSink + ?Sized>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, slack: f32, leaf: u32, out: &mut S) -> f32 {
+    pub fn spans_nearest<S: SpanSink + ?Sized>(&self, ray: &Ray, slack: f32, leaf: u32, out: &mut S) -> f32 {
+        let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         if !(tmax >= tmin) || self.wide.is_empty() {
             return f32::INFINITY;
         }
         if self.rule != InsideRule::Orientation || !self.outside_at(o, d, tmin) {
-            self.spans(o, d, tmin, tmax, leaf, out);
+            self.spans(ray, leaf, out);
             return f32::INFINITY;
         }
         let r = WoopRay::new(o, d);
@@ -1221,7 +1229,7 @@ impl MeshData {
                         }
                         Err(()) => {
                             // A degenerate tree deeper than the stack: the unpruned walk.
-                            self.spans(o, d, tmin, tmax, leaf, out);
+                            self.spans(ray, leaf, out);
                             return f32::INFINITY;
                         }
                     }
@@ -1233,7 +1241,7 @@ impl MeshData {
                     // Crossings found before `cut` shrank may lie past it: not all
                     // of their neighbours were seen.
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, tmin, cut.min(tmax), leaf, out);
+                    self.walk_signed(&xs, 0, (tmin, cut.min(tmax)), leaf, out);
                     return cut;
                 }
             }
@@ -1489,7 +1497,7 @@ impl MeshData {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             self.sort_signed(&mut xs[k]);
-            self.walk_signed(&xs[k], 0, tmin[k], cut[k].min(tmax[k]), leaf, &mut out[k]);
+            self.walk_signed(&xs[k], 0, (tmin[k], cut[k].min(tmax[k])), leaf, &mut out[k]);
         }
         (active, cut)
     }

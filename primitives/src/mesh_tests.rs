@@ -106,7 +106,7 @@ fn check_ray_closed(m: &MeshData, o: Vec3, d: Vec3, convex: Option<(&[Vec3], &[[
     }
     let mut spans: Vec<crate::Span> = vec![];
     let (tmin, tmax) = (0.0, 10.0);
-    m.spans(o, d, tmin, tmax, 7, &mut spans);
+    m.spans(&Ray::segment(o, d, tmin, tmax), 7, &mut spans);
     let mut checked = 0;
     let mut prev = tmin;
     let mut probe = |t: f32, want: bool| {
@@ -258,7 +258,7 @@ fn mesh_exact_pole_rays_octasphere() {
             assert_eq!(xs.len(), 2, "{xs:?}");
             assert_eq!((xs[0].0, xs[1].0), (8.0, 12.0));
             let mut s: Vec<crate::Span> = vec![];
-            m.spans(o, d, 0.0, f32::INFINITY, 3, &mut s);
+            m.spans(&Ray::segment(o, d, 0.0, f32::INFINITY), 3, &mut s);
             assert_eq!(s.len(), 1);
             assert_eq!((s[0].t0, s[0].t1), (8.0, 12.0));
             // Outward normals at both ends.
@@ -318,7 +318,7 @@ fn mesh_octasphere_vs_analytic_sphere() {
         let target = Vec3::new(rng.gen_range(-1.1..1.1), rng.gen_range(-1.1..1.1), rng.gen_range(-1.1..1.1));
         let d = (target - o) * rng.gen_range(0.5..2.0);
         let mut s: Vec<crate::Span> = vec![];
-        m.spans(o, d, f32::NEG_INFINITY, f32::INFINITY, 0, &mut s);
+        m.spans(&Ray::segment(o, d, f32::NEG_INFINITY, f32::INFINITY), 0, &mut s);
         let a = kernels::sphere(o, d);
         // closest approach of the line to the centre
         let f = (o - d * (o.dot(d) / d.length_squared())).length();
@@ -397,7 +397,7 @@ fn mesh_inside_out_is_flipped() {
     assert!(m.warnings()[0].contains("inside out"));
     assert!(m.contains(Vec3::ZERO) && !m.contains(Vec3::splat(1.5)));
     let mut s: Vec<crate::Span> = vec![];
-    m.spans(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 0.0, 100.0, 0, &mut s);
+    m.spans(&Ray::segment(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 0.0, 100.0), 0, &mut s);
     assert_eq!(s.len(), 1);
     assert_eq!(m.normal(s[0].s0.sub, Vec3::new(-1.0, 0.1, 0.2)), Vec3::NEG_X);
     assert_eq!(m.normal(s[0].s1.sub, Vec3::new(1.0, 0.1, 0.2)), Vec3::X);
@@ -408,15 +408,15 @@ fn mesh_starts_inside_and_clips() {
     let (pos, tris) = cube();
     let m = MeshData::new(pos, tris, InsideRule::Orientation).unwrap();
     let mut s: Vec<crate::Span> = vec![];
-    m.spans(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 2.5, 3.5, 0, &mut s);
+    m.spans(&Ray::segment(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 2.5, 3.5), 0, &mut s);
     assert_eq!(s.len(), 1);
     assert_eq!((s[0].t0, s[0].t1, s[0].s0, s[0].s1), (2.5, 3.5, Surf::NONE, Surf::NONE));
     s.clear();
-    m.spans(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 2.5, 100.0, 0, &mut s);
+    m.spans(&Ray::segment(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 2.5, 100.0), 0, &mut s);
     assert_eq!((s[0].t0, s[0].t1, s[0].s0), (2.5, 4.0, Surf::NONE));
     assert!(s[0].s1.is_real());
     s.clear();
-    m.spans(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 0.0, 1.0, 0, &mut s);
+    m.spans(&Ray::segment(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 0.0, 1.0), 0, &mut s);
     assert!(s.is_empty());
     assert_eq!(m.closest_hit(Vec3::new(-3.0, 0.1, 0.2), Vec3::X, 0.0, 100.0).map(|h| h.0), Some(2.0));
 }
@@ -506,7 +506,7 @@ fn mesh_perf() {
         let mut ns = 0;
         for &(o, d) in &rays {
             spans.clear();
-            m.spans(o, d, 0.0, f32::INFINITY, 0, &mut spans);
+            m.spans(&Ray::segment(o, d, 0.0, f32::INFINITY), 0, &mut spans);
             ns += spans.len();
         }
         let sp = t.elapsed().as_secs_f64();
@@ -538,7 +538,7 @@ fn mesh_perf() {
         let t = std::time::Instant::now();
         for &(o, d) in &cam {
             spans.clear();
-            m.spans(o, d, 0.0, f32::INFINITY, 0, &mut spans);
+            m.spans(&Ray::segment(o, d, 0.0, f32::INFINITY), 0, &mut spans);
         }
         let csp = t.elapsed().as_secs_f64();
         println!(
@@ -713,10 +713,10 @@ fn mesh_spans_nearest8_matches_single_rays() {
                 }
                 packed += 1;
                 let mut one: Vec<Span> = Vec::new();
-                let v = m.spans_nearest(o, d[k], tmin[k], tmax[k], slack[k], 7, &mut one);
+                let v = m.spans_nearest(&Ray::segment(o, d[k], tmin[k], tmax[k]), slack[k], 7, &mut one);
                 // The contract: exact on [tmin, v], i.e. the full query clipped there.
                 let mut full: Vec<Span> = Vec::new();
-                m.spans(o, d[k], tmin[k], v.min(tmax[k]), 7, &mut full);
+                m.spans(&Ray::segment(o, d[k], tmin[k], v.min(tmax[k])), 7, &mut full);
                 assert_eq!(full, one, "{name}: bundle {i} ray {k}: not the full spans on [tmin, {v}]");
                 assert_eq!(v, cut[k], "{name}: bundle {i} ray {k}: cut; o {o:?} d {:?}", d[k]);
                 let ts = |s: &[Span]| s.iter().map(|s| (s.t0, s.t1, s.s0, s.s1)).collect::<Vec<_>>();
@@ -748,7 +748,7 @@ fn mesh_spans_nearest8_matches_single_rays() {
                 }
                 let v = nt.1[k];
                 let mut full: Vec<Span> = Vec::new();
-                m.spans(o, d[k], tmin[k], v.min(tmax[k]), 7, &mut full);
+                m.spans(&Ray::segment(o, d[k], tmin[k], v.min(tmax[k])), 7, &mut full);
                 assert_eq!(full, out_t[k], "{name}: bundle {i} ray {k}: through {:?}: not the full spans on [tmin, {v}]", through[k]);
                 let crossings = m.crossings(o, d[k], tmin[k], tmax[k]);
                 if let Some(&(t1, ..)) = crossings.first() {

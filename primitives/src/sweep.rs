@@ -69,7 +69,7 @@ use crate::poly::{bern_restrict, bern_roots, cubic_range, roots_bern, to_bernste
 
 /// An unmerged span `(t0, sub0, t1, sub1)`.
 type RawSpan = (f32, u32, f32, u32);
-use crate::{aabb::Aabb, bvh::FlatBvh, table::push_clipped, ShapeError, SpanSink, Surf};
+use crate::{aabb::Aabb, bvh::FlatBvh, table::push_clipped, Ray, ShapeError, Span, SpanSink, Surf};
 
 /// Chains with more segments than this get a BVH over their segments.
 pub const BVH_MIN_SEGMENTS: usize = 4;
@@ -249,11 +249,11 @@ pub(crate) fn push_union_slack<S: SpanSink + ?Sized>(iv: &mut [RawSpan], slack: 
                 cur.3 = x.3;
             }
         } else {
-            push_clipped(out, cur.0, Surf::new(leaf, cur.1), cur.2, Surf::new(leaf, cur.3), tmin, tmax);
+            push_clipped(out, Span { t0: cur.0, s0: Surf::new(leaf, cur.1), t1: cur.2, s1: Surf::new(leaf, cur.3) }, tmin, tmax);
             cur = x;
         }
     }
-    push_clipped(out, cur.0, Surf::new(leaf, cur.1), cur.2, Surf::new(leaf, cur.3), tmin, tmax);
+    push_clipped(out, Span { t0: cur.0, s0: Surf::new(leaf, cur.1), t1: cur.2, s1: Surf::new(leaf, cur.3) }, tmin, tmax);
 }
 
 impl SweptSphereData {
@@ -314,10 +314,10 @@ impl SweptSphereData {
         self.segs.len()
     }
 
-    /// Pushes the spans of `o + t d` inside the sweep, clipped to `[tmin, tmax]`,
-    /// sorted and disjoint; real crossings carry `Surf::new(leaf, segment)`.
-    pub fn spans<S: SpanSink + ?Sized>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, leaf: u32, out: &mut S) {
-        let inv = d.recip();
+    /// Pushes the spans of the (local) ray inside the sweep, clipped to its
+    /// range, sorted and disjoint; real crossings carry `Surf::new(leaf, segment)`.
+    pub fn spans<S: SpanSink + ?Sized>(&self, ray: &Ray, leaf: u32, out: &mut S) {
+        let Ray { origin: o, dir: d, inv_dir: inv, tmin, tmax } = *ray;
         if self.bounds.ray_range(o, inv, tmin, tmax).is_none() {
             return;
         }
@@ -683,7 +683,7 @@ pub(crate) mod tests {
         let pad = 0.01 * size / dl;
         let (t0, t1) = (ta as f64 - pad, tb as f64 + pad);
         let mut got: Vec<Span> = vec![];
-        data.spans(o, d, t0 as f32, t1 as f32, 0, &mut got);
+        data.spans(&Ray::segment(o, d, t0 as f32, t1 as f32), 0, &mut got);
         for w in got.windows(2) {
             assert!(w[0].t1 < w[1].t0, "spans not sorted/disjoint: {got:?}");
         }
@@ -836,7 +836,7 @@ pub(crate) mod tests {
                 let o = (c - v * 3.0).as_vec3();
                 let d = v.as_vec3();
                 let mut got: Vec<Span> = vec![];
-                data.spans(o, d, -1e9, 1e9, 0, &mut got);
+                data.spans(&Ray::segment(o, d, -1e9, 1e9), 0, &mut got);
                 let want = capsule(a, b, r, o.as_dvec3(), d.as_dvec3());
                 match want {
                     Some((t0, t1)) if (t1 - t0) * v.length() > 1e-5 * size => {
@@ -870,7 +870,7 @@ pub(crate) mod tests {
                 let tgt = b.min.as_dvec3() + (b.max - b.min).as_dvec3() * DVec3::new(rng.gen(), rng.gen(), rng.gen());
                 let (o, d) = (o.as_vec3(), (tgt - o).as_vec3());
                 let mut got: Vec<Span> = vec![];
-                data.spans(o, d, 0.0, 10.0, 0, &mut got);
+                data.spans(&Ray::segment(o, d, 0.0, 10.0), 0, &mut got);
                 for (k, s) in got.iter().enumerate() {
                     if (s.t1 - s.t0) * d.length() < 1e-4 * size as f32 {
                         continue;
@@ -967,7 +967,7 @@ pub(crate) mod tests {
             let t = std::time::Instant::now();
             for d in &rays {
                 let mut v = vec![];
-                data.spans(eye, *d, 0.0, f32::INFINITY, 0, &mut v);
+                data.spans(&Ray::segment(eye, *d, 0.0, f32::INFINITY), 0, &mut v);
                 out.push(v);
             }
             (t.elapsed().as_secs_f64() * 1e9 / rays.len() as f64, out)

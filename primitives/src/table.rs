@@ -10,7 +10,7 @@ use crate::{
     kernels,
     mesh::{MeshData, NearestRays8},
     sweep::SweptSphereData,
-    Span, SpanSink, Surf,
+    Ray, Span, SpanSink, Surf,
 };
 
 /// Ball.
@@ -465,10 +465,11 @@ impl LeafTable {
         Ok(i)
     }
 
-    /// Pushes the spans of leaf `i` along the ray `o + t d`, clipped to `[tmin, tmax]`,
+    /// Pushes the spans of leaf `i` along the (world) ray, clipped to its range,
     /// into `out` (sorted, disjoint). Clipped ends carry [`Surf::NONE`].
     #[inline]
-    pub fn spans<S: SpanSink + ?Sized>(&self, i: u32, o: Vec3, d: Vec3, tmin: f32, tmax: f32, out: &mut S) {
+    pub fn spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, out: &mut S) {
+        let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         let iu = i as usize;
         let m = &self.to_local[iu];
         let lo = m.transform_point3(o);
@@ -483,25 +484,25 @@ impl LeafTable {
                 let mut buf = [(0.0f32, 0.0f32); 3];
                 let n = kernels::torus(lo, ld, self.p0[iu].x, &mut buf);
                 for &(a, b) in &buf[..n] {
-                    push_clipped(out, a, Surf::new(i, 0), b, Surf::new(i, 0), tmin, tmax);
+                    push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, tmin, tmax);
                 }
                 return;
             }
             LeafKind::SweptSphere => {
-                self.sweeps[self.ext[iu] as usize].spans(lo, ld, tmin, tmax, i, out);
+                self.sweeps[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
                 return;
             }
             LeafKind::GenCylinder => {
-                self.gcyls[self.ext[iu] as usize].spans(lo, ld, tmin, tmax, i, out);
+                self.gcyls[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
                 return;
             }
             LeafKind::Mesh => {
-                self.meshes[self.ext[iu] as usize].spans(lo, ld, tmin, tmax, i, out);
+                self.meshes[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
                 return;
             }
         };
         if let Some((t0, s0, t1, s1)) = r {
-            push_clipped(out, t0, Surf::new(i, s0), t1, Surf::new(i, s1), tmin, tmax);
+            push_clipped(out, Span { t0, s0: Surf::new(i, s0), t1, s1: Surf::new(i, s1) }, tmin, tmax);
         }
     }
 
@@ -511,33 +512,23 @@ impl LeafTable {
     /// on `[tmin, v]` and none lies past `v`, the value returned (infinity when
     /// the answer is the full one).
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    pub fn spans_for<S: SpanSink + ?Sized>(
-        &self,
-        i: u32,
-        o: Vec3,
-        d: Vec3,
-        tmin: f32,
-        tmax: f32,
-        nearest: Option<f32>,
-        out: &mut S,
-    ) -> f32 {
+    pub fn spans_for<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, nearest: Option<f32>, out: &mut S) -> f32 {
         if let Some(slack) = nearest {
             if self.kind[i as usize] == LeafKind::Mesh {
-                return self.mesh_nearest(i, o, d, tmin, tmax, slack, out);
+                return self.mesh_nearest(i, ray, slack, out);
             }
         }
-        self.spans(i, o, d, tmin, tmax, out);
+        self.spans(i, ray, out);
         f32::INFINITY
     }
 
     #[inline(never)]
-    #[allow(clippy::too_many_arguments)]
-    fn mesh_nearest<S: SpanSink + ?Sized>(&self, i: u32, o: Vec3, d: Vec3, tmin: f32, tmax: f32, slack: f32, out: &mut S) -> f32 {
+    fn mesh_nearest<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, slack: f32, out: &mut S) -> f32 {
         let iu = i as usize;
         let m = &self.to_local[iu];
         let mesh = &self.meshes[self.ext[iu] as usize];
-        mesh.spans_nearest(m.transform_point3(o), m.transform_vector3(d), tmin, tmax, slack, i, out)
+        let local = Ray::segment(m.transform_point3(ray.origin), m.transform_vector3(ray.dir), ray.tmin, ray.tmax);
+        mesh.spans_nearest(&local, slack, i, out)
     }
 
     /// Appends the world planes of leaf `i` when it is a polytope (a half-space:
@@ -617,10 +608,11 @@ impl LeafTable {
         }
     }
 
-    /// Outward unit normal (world space) of leaf `i` at parameter `t` of the ray, on
+    /// Outward unit normal (world space) of leaf `i` at parameter `t` of the (world) ray, on
     /// sub-surface `sub` (as reported with the crossing). Cold path: called once per
     /// shown pixel.
-    pub fn normal(&self, i: u32, sub: u32, o: Vec3, d: Vec3, t: f32) -> Vec3 {
+    pub fn normal(&self, i: u32, sub: u32, ray: &Ray, t: f32) -> Vec3 {
+        let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
         let m = &self.to_local[iu];
         let p0 = self.p0[iu];
@@ -663,7 +655,8 @@ impl LeafTable {
 
 /// Clips `[t0, t1]` to `[tmin, tmax]` and pushes it if it keeps a positive length.
 #[inline(always)]
-pub fn push_clipped<S: SpanSink + ?Sized>(out: &mut S, t0: f32, s0: Surf, t1: f32, s1: Surf, tmin: f32, tmax: f32) {
+pub fn push_clipped<S: SpanSink + ?Sized>(out: &mut S, span: Span, tmin: f32, tmax: f32) {
+    let Span { t0, t1, s0, s1 } = span;
     // Ends beyond the range, or at infinity (a half-space), are not surfaces.
     let (t0, s0) = if t0 < tmin || !t0.is_finite() { (t0.max(tmin), Surf::NONE) } else { (t0, s0) };
     let (t1, s1) = if t1 > tmax || !t1.is_finite() { (t1.min(tmax), Surf::NONE) } else { (t1, s1) };
