@@ -3,7 +3,7 @@
 # clippy), installs what the tests need (POV-Ray 3.7 and
 # python3 for the oracle comparison, Debian's assimp test models for the mesh
 # importer corpus, GNU time for the hostile tests' memory bounds) when they are
-# missing, then runs every test of the workspace,
+# missing, then runs every test of the workspace, then the embedding examples,
 # then the one-node Slurm test of split rendering (scripts/slurm/test.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -36,6 +36,11 @@ cargo clippy --workspace --all-targets --release -- -D warnings
 
 # Release-mode tests: the oracles trace tens of thousands of rays.
 cargo test --workspace --release "$@"
+
+# The embedding examples of the README (quick: seconds each).
+cargo run --release --example pick
+cargo run --release --example mesh_cut
+cargo run --release --example live
 
 # A real scheduler: a one-node Slurm runs a split render as a job array plus a
 # merge job, compared byte for byte with a single render (needs root; installs

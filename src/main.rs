@@ -442,7 +442,7 @@ fn run(cli: Cli) -> Result<()> {
                             h.normal.y,
                             h.normal.z,
                             csv(&rs.objects[h.object as usize].name),
-                            csv(&rs.leaf_info[h.leaf as usize].name)
+                            csv(&rs.leaf_name(h.leaf))
                         )?,
                         None => writeln!(out, "{i},0,,,,,,")?,
                     }

@@ -28,16 +28,23 @@
 
 pub mod bake;
 mod box_list;
+mod changes;
 pub mod components;
+mod entity_hash;
 pub mod knobs;
+mod live;
+#[cfg(test)]
+mod live_tests;
+mod owners;
 mod packet;
 pub mod part;
+mod refit;
 pub mod render;
 mod render_tile;
 pub mod scene;
 pub mod tile;
 
-pub use bake::{bake_scene, find_objects, fingerprint_world, sync_scene, BakeError};
+pub use bake::{bake_scene, find_objects, fingerprint_world, sync_scene, sync_scene_touched, BakeError};
 pub use components::*;
 pub use glam;
 pub use hecs;

@@ -49,7 +49,8 @@ pub struct ObjectInfo {
 pub struct LeafInfo {
     /// Its entity.
     pub entity: Entity,
-    /// Its name (`Name`, else `leaf<i>`).
+    /// Its `Name` (empty without one; [`RenderScene::leaf_name`] then
+    /// gives `leaf<i>`).
     pub name: String,
     /// Its colour (own `Material`, else the nearest ancestor's, else grey).
     pub color: Vec3,
@@ -89,7 +90,8 @@ pub struct RenderScene {
     /// The fusing tolerance's growth per unit of a ray origin's distance from
     /// `center` (set by the bake, see [`RenderScene::ray_ctx`]).
     pub(crate) eps_far: f32,
-    pub(crate) fingerprint: u64,
+    /// What [`crate::sync_scene`] keeps between syncs (`None` until it bakes).
+    pub(crate) live: Option<Box<crate::live::LiveState>>,
     /// Mesh leaves that nearest-hit queries ask in nearest mode, traced ahead for
     /// whole packets by [`RenderScene::intersect_packet`] (empty when there are
     /// more than [`PACKET_MESHES`]).

@@ -1,0 +1,425 @@
+//! Model test of the live bake (hecs style): random edit sequences on a
+//! World, a [`sync_scene`] after each, and every answer compared with a fresh
+//! full bake of the same World. Leaves are compared by entity (a live scene's
+//! leaf rows differ from a fresh bake's).
+
+use glam::{DAffine3, DVec3, Vec3};
+use hecs::{Entity, World};
+use rand::{rngs::SmallRng, Rng, SeedableRng};
+use std::sync::Arc;
+
+use crate::live::LiveCounts;
+use crate::*;
+
+fn seed_from_env(default: u64) -> u64 {
+    let seed = std::env::var("ROTHRAY_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(default);
+    println!("seed {seed} (ROTHRAY_SEED overrides)");
+    seed
+}
+
+fn v3(rng: &mut SmallRng, r: f32) -> Vec3 {
+    if r == 0.0 {
+        return Vec3::ZERO;
+    }
+    Vec3::new(rng.gen_range(-r..r), rng.gen_range(-r..r), rng.gen_range(-r..r))
+}
+
+fn cube_mesh() -> Arc<MeshData> {
+    let p: Vec<Vec3> = (0..8).map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32) - 0.5).collect();
+    let t = vec![
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    Arc::new(MeshData::new(p, t, InsideRule::Winding).expect("cube mesh"))
+}
+
+/// A random analytic leaf.
+fn spawn_leaf(world: &mut World, rng: &mut SmallRng, spread: f32) -> Entity {
+    let t = Transform::from_translation(v3(rng, spread));
+    let e = world.spawn((t,));
+    insert_shape(world, rng, e);
+    if rng.gen_bool(0.3) {
+        world.insert_one(e, Material { color: v3(rng, 1.0).abs() }).unwrap();
+    }
+    e
+}
+
+fn insert_shape(world: &mut World, rng: &mut SmallRng, e: Entity) {
+    let r = rng.gen_range(0.3..1.2);
+    match rng.gen_range(0..5) {
+        0 => world.insert_one(e, Sphere { center: v3(rng, 0.3), radius: r }),
+        4 => {
+            // A swept sphere: its data sits in the leaf table's own list.
+            let p = |t: f32| [t - 0.5, 0.3 * t, 0.0, 0.2 + 0.1 * t];
+            world.insert_one(e, SweptSphere { bezier: vec![p(0.0), p(0.3), p(0.7), p(1.0)] })
+        }
+        1 => world.insert_one(e, Cuboid { min: Vec3::splat(-r), max: Vec3::splat(r) + v3(rng, 0.2).abs() }),
+        2 => world.insert_one(e, Cylinder { a: Vec3::new(0.0, -r, 0.0), b: Vec3::new(0.1, r, 0.0), radius: r * 0.5 }),
+        _ => world.insert_one(e, Torus { center: Vec3::ZERO, axis: Vec3::Y, major: r, minor: r * 0.3 }),
+    }
+    .unwrap();
+}
+
+fn remove_shape(world: &mut World, e: Entity) {
+    let _ = world.remove_one::<Sphere>(e);
+    let _ = world.remove_one::<Cuboid>(e);
+    let _ = world.remove_one::<Cylinder>(e);
+    let _ = world.remove_one::<Torus>(e);
+    let _ = world.remove_one::<MeshSolid>(e);
+    let _ = world.remove_one::<SweptSphere>(e);
+}
+
+fn random_op(rng: &mut SmallRng) -> Op {
+    [Op::Union, Op::Intersection, Op::Difference][rng.gen_range(0..3)]
+}
+
+/// A random object: a leaf, a node over leaves, or nodes nested two deep.
+fn spawn_object(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> Entity {
+    let at = v3(rng, 6.0);
+    let root = match rng.gen_range(0..5) {
+        0 => spawn_leaf(world, rng, 0.0),
+        1 if rng.gen_bool(0.3) => {
+            let m = world.spawn((Transform(DAffine3::from_scale(DVec3::splat(1.5))), MeshSolid(mesh.clone())));
+            let s = spawn_leaf(world, rng, 0.6);
+            world.spawn((CsgNode::difference([m, s]),))
+        }
+        _ => {
+            let n = rng.gen_range(2..5);
+            let mut kids: Vec<Entity> = (0..n).map(|_| spawn_leaf(world, rng, 0.8)).collect();
+            if rng.gen_bool(0.4) {
+                let inner: Vec<Entity> = (0..2).map(|_| spawn_leaf(world, rng, 0.5)).collect();
+                kids.push(world.spawn((CsgNode { op: random_op(rng), children: inner }, Transform::from_translation(v3(rng, 0.5)))));
+            }
+            world.spawn((CsgNode { op: random_op(rng), children: kids },))
+        }
+    };
+    world.insert_one(root, Transform::from_translation(at)).unwrap();
+    if rng.gen_bool(0.3) {
+        world.insert_one(root, Name::new(format!("obj{}", rng.gen::<u16>()))).unwrap();
+    }
+    if rng.gen_bool(0.2) {
+        world.insert_one(root, ObjectOrder(rng.gen_range(0..5))).unwrap();
+    }
+    root
+}
+
+fn despawn_tree(world: &mut World, e: Entity, touched: &mut Vec<Entity>) {
+    let kids = world.get::<&CsgNode>(e).map(|n| n.children.clone()).unwrap_or_default();
+    for c in kids {
+        despawn_tree(world, c, touched);
+    }
+    touched.push(e);
+    let _ = world.despawn(e);
+}
+
+fn pick<T: hecs::Component>(world: &World, rng: &mut SmallRng) -> Option<Entity> {
+    let all: Vec<Entity> = world.query::<&T>().iter().map(|(e, _)| e).collect();
+    (!all.is_empty()).then(|| all[rng.gen_range(0..all.len())])
+}
+
+fn is_leaf(world: &World, e: Entity) -> bool {
+    world.get::<&CsgNode>(e).is_err()
+}
+
+/// One random edit, listing the entities it touched; returns its name.
+fn edit(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>, touched: &mut Vec<Entity>) -> &'static str {
+    match rng.gen_range(0..16) {
+        0 | 1 => {
+            let before: std::collections::HashSet<Entity> = world.iter().map(|e| e.entity()).collect();
+            spawn_object(world, rng, mesh);
+            touched.extend(world.iter().map(|e| e.entity()).filter(|e| !before.contains(e)));
+            "spawn"
+        }
+        2 => {
+            let roots = find_objects(world);
+            if !roots.is_empty() {
+                despawn_tree(world, roots[rng.gen_range(0..roots.len())], touched);
+            }
+            "despawn"
+        }
+        3 | 4 => {
+            if let Some(e) = pick::<Transform>(world, rng) {
+                let t = Transform::from_translation(v3(rng, 6.0));
+                world.insert_one(e, t).unwrap();
+                touched.push(e);
+            }
+            "move"
+        }
+        5 => {
+            if let Some(e) = pick::<Transform>(world, rng).filter(|&e| is_leaf(world, e)) {
+                remove_shape(world, e);
+                insert_shape(world, rng, e);
+                touched.push(e);
+            }
+            "reshape"
+        }
+        6 => {
+            if let Some(e) = pick::<Sphere>(world, rng) {
+                world.get::<&mut Sphere>(e).unwrap().radius = rng.gen_range(0.2..1.5);
+                touched.push(e);
+            }
+            "radius"
+        }
+        7 => {
+            // A leaf child moves to another node (leaves only: no cycles), or
+            // is shared with it.
+            let (Some(a), Some(b)) = (pick::<CsgNode>(world, rng), pick::<CsgNode>(world, rng)) else { return "reparent" };
+            let kids = world.get::<&CsgNode>(a).unwrap().children.clone();
+            let leaves: Vec<usize> = (0..kids.len()).filter(|&i| is_leaf(world, kids[i])).collect();
+            if a != b && kids.len() > 1 && !leaves.is_empty() {
+                let at = leaves[rng.gen_range(0..leaves.len())];
+                // Now and then the leaf stays where it was too: two trees share it.
+                let share = rng.gen_bool(0.3);
+                let c = if share { kids[at] } else { world.get::<&mut CsgNode>(a).unwrap().children.remove(at) };
+                world.get::<&mut CsgNode>(b).unwrap().children.push(c);
+                touched.extend([a, b]);
+            }
+            "reparent"
+        }
+        8 => {
+            if let Some(e) = pick::<CsgNode>(world, rng) {
+                world.get::<&mut CsgNode>(e).unwrap().op = random_op(rng);
+                touched.push(e);
+            }
+            "op"
+        }
+        9 => {
+            if let Some(e) = pick::<Hidden>(world, rng).filter(|_| rng.gen_bool(0.5)) {
+                world.remove_one::<Hidden>(e).unwrap();
+                touched.push(e);
+            } else {
+                let roots = find_objects(world);
+                if !roots.is_empty() {
+                    let r = roots[rng.gen_range(0..roots.len())];
+                    world.insert_one(r, Hidden).unwrap();
+                    touched.push(r);
+                }
+            }
+            "hide"
+        }
+        10 => {
+            if let Some(e) = pick::<Transform>(world, rng) {
+                world.insert_one(e, Material { color: v3(rng, 1.0).abs() }).unwrap();
+                touched.push(e);
+            }
+            "material"
+        }
+        11 | 15 => {
+            if let Some(e) = pick::<MeshSolid>(world, rng) {
+                world.remove_one::<MeshSolid>(e).unwrap();
+                world.insert_one(e, Sphere { center: Vec3::ZERO, radius: 0.7 }).unwrap();
+                touched.push(e);
+            }
+            "remove mesh"
+        }
+        12 => {
+            if let Some(e) = pick::<Transform>(world, rng).filter(|&e| is_leaf(world, e) && rng.gen_bool(0.3)) {
+                remove_shape(world, e);
+                world.insert_one(e, MeshSolid(mesh.clone())).unwrap();
+                touched.push(e);
+            }
+            "add mesh"
+        }
+        _ => {
+            if let Some(e) = pick::<Transform>(world, rng) {
+                if rng.gen_bool(0.5) {
+                    world.insert_one(e, Name::new(format!("n{}", rng.gen::<u8>()))).unwrap();
+                } else {
+                    world.insert_one(e, ObjectOrder(rng.gen_range(0..5))).unwrap();
+                }
+                touched.push(e);
+            }
+            "rename"
+        }
+    }
+}
+
+/// A span with its surfaces named by entity.
+fn span_key(s: &RenderScene, sp: &primitives::Span) -> String {
+    let surf = |x: primitives::Surf| {
+        if x.is_real() {
+            format!("{:?}/{}/{}", s.leaf_info[x.leaf_index() as usize].entity, x.sub, x.flipped())
+        } else {
+            "-".into()
+        }
+    };
+    format!("[{:08x} {} {:08x} {}]", sp.t0.to_bits(), surf(sp.s0), sp.t1.to_bits(), surf(sp.s1))
+}
+
+fn hit_key(s: &RenderScene, h: Option<Hit>) -> String {
+    match h {
+        None => "miss".into(),
+        Some(h) => {
+            let l = &s.leaf_info[h.leaf as usize];
+            format!(
+                "t {:08x} n {:?} obj {:?} leaf {:?} sub {} color {:?}",
+                h.t.to_bits(),
+                h.normal.to_array().map(f32::to_bits),
+                s.objects[h.object as usize].entity,
+                l.entity,
+                h.sub,
+                l.color.to_array().map(f32::to_bits)
+            )
+        }
+    }
+}
+
+/// The renderer (tiles culled by the object cull tree, packets) draws the
+/// same normal picture of both scenes.
+fn compare_pictures(live: &RenderScene, fresh: &RenderScene, what: &str) {
+    let cam = Camera { eye: Vec3::new(9.0, 12.0, 30.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 50.0 };
+    let s = RenderSettings {
+        width: 64,
+        height: 48,
+        spp: 1,
+        aov: Aov::Normal,
+        background: Vec3::ZERO,
+        lights: Vec::new(),
+        ambient: 0.2,
+        part: Part::WHOLE,
+    };
+    let (a, _) = render(live, &cam, &s, &|_, _| {});
+    let (b, _) = render(fresh, &cam, &s, &|_, _| {});
+    assert!(a == b, "{what}: the normal pictures differ");
+}
+
+/// Every answer of `live` equals that of `fresh` on random rays and points.
+fn compare(live: &RenderScene, fresh: &RenderScene, rng: &mut SmallRng, what: &str) {
+    let objs = |s: &RenderScene| -> Vec<String> {
+        s.objects.iter().map(|o| format!("{:?} {} {:?} {:?}", o.entity, o.name, o.bounds.min.to_array(), o.bounds.max.to_array())).collect()
+    };
+    assert_eq!(objs(live), objs(fresh), "{what}: objects");
+    assert_eq!(live.eps.to_bits(), fresh.eps.to_bits(), "{what}: eps");
+    for k in 0..150 {
+        let o = v3(rng, 14.0);
+        let target = if fresh.objects.is_empty() || k % 3 == 0 {
+            v3(rng, 8.0)
+        } else {
+            fresh.objects[rng.gen_range(0..fresh.objects.len())].bounds.center()
+        };
+        let ray = Ray::new(o, target - o + v3(rng, 0.3));
+        let (a, b) = (live.intersect(&ray), fresh.intersect(&ray));
+        assert_eq!(hit_key(live, a), hit_key(fresh, b), "{what}: intersect {ray:?}");
+        assert_eq!(live.occluded(&ray), fresh.occluded(&ray), "{what}: occluded {ray:?}");
+        if !fresh.objects.is_empty() {
+            let oi = rng.gen_range(0..fresh.objects.len() as u32);
+            let sa: Vec<String> = live.spans(&ray, oi).iter().map(|x| span_key(live, x)).collect();
+            let sb: Vec<String> = fresh.spans(&ray, oi).iter().map(|x| span_key(fresh, x)).collect();
+            assert_eq!(sa, sb, "{what}: spans of object {oi} on {ray:?}");
+            let p = v3(rng, 8.0);
+            assert_eq!(live.classify(p), fresh.classify(p), "{what}: classify {p}");
+        }
+    }
+}
+
+fn add_counts(total: &mut LiveCounts, c: LiveCounts) {
+    total.full += c.full;
+    total.partial += c.partial;
+    total.in_place += c.in_place;
+    total.appended += c.appended;
+}
+
+/// Random edits (spawn, despawn, move, reshape, radius, re-parent, op, hide,
+/// material, add and remove a mesh, rename, order), a sync after each batch,
+/// each synced scene compared with a fresh full bake.
+#[test]
+fn live_sync_matches_a_fresh_bake_after_random_edits() {
+    let seed = seed_from_env(13);
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mesh = cube_mesh();
+    let (mut total, mut last) = (LiveCounts::default(), LiveCounts::default());
+    for world_no in 0..6 {
+        let mut world = World::new();
+        for _ in 0..rng.gen_range(0..12) {
+            spawn_object(&mut world, &mut rng, &mesh);
+        }
+        let mut scene = RenderScene::default();
+        let mut log = Vec::new();
+        // Odd worlds sync with the list of touched entities (now and then
+        // with a full scan in between).
+        let listed = world_no % 2 == 1;
+        for step in 0..150 {
+            let mut touched = Vec::new();
+            for _ in 0..rng.gen_range(1..4) {
+                log.push(edit(&mut world, &mut rng, &mesh, &mut touched));
+            }
+            let what = format!("seed {seed} world {world_no} step {step} after {:?}", &log[log.len().saturating_sub(3)..]);
+            let got = if listed && rng.gen_bool(0.9) {
+                sync_scene_touched(&mut world, &mut scene, &touched)
+            } else {
+                sync_scene(&mut world, &mut scene)
+            };
+            match RenderScene::from_world(&world) {
+                Ok(fresh) => {
+                    assert!(got.is_ok(), "{what}: live sync failed ({got:?}) where a fresh bake works");
+                    compare(&scene, &fresh, &mut rng, &what);
+                    if step % 10 == 0 {
+                        compare_pictures(&scene, &fresh, &what);
+                    }
+                }
+                Err(e) => assert_eq!(got.err(), Some(e), "{what}: errors"),
+            }
+            // A failed sync drops the live state, and its counts with it.
+            match scene.live.as_ref() {
+                Some(l) => last = l.counts,
+                None => add_counts(&mut total, std::mem::take(&mut last)),
+            }
+        }
+        add_counts(&mut total, std::mem::take(&mut last));
+    }
+    println!("{total:?}");
+    assert!(total.full > 0 && total.partial > 50 && total.in_place > 0 && total.appended > 0, "every path ran: {total:?}");
+}
+
+/// Many objects moving a few at a time: the refit trees (and their rebuild
+/// once degraded), in-place rows and dead rows, against fresh bakes.
+#[test]
+fn live_refits_many_objects_like_a_fresh_bake() {
+    let seed = seed_from_env(1313);
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut world = World::new();
+    let roots: Vec<Entity> = (0..1500)
+        .map(|_| {
+            let a = spawn_leaf(&mut world, &mut rng, 0.0);
+            let b = spawn_leaf(&mut world, &mut rng, 0.7);
+            world.spawn((CsgNode::difference([a, b]), Transform::from_translation(v3(&mut rng, 40.0))))
+        })
+        .collect();
+    let mut scene = RenderScene::default();
+    sync_scene(&mut world, &mut scene).unwrap();
+    for round in 0..60 {
+        for _ in 0..rng.gen_range(1..40) {
+            let r = roots[rng.gen_range(0..roots.len())];
+            let t = world.get::<&Transform>(r).unwrap().0.translation;
+            world.insert_one(r, Transform(DAffine3::from_translation(t + v3(&mut rng, 3.0).as_dvec3()))).unwrap();
+            if rng.gen_bool(0.1) {
+                world.get::<&mut CsgNode>(r).unwrap().op = random_op(&mut rng);
+            }
+            if rng.gen_bool(0.02) {
+                // More rows: the object's rows move to the end of the tables.
+                let c = spawn_leaf(&mut world, &mut rng, 0.7);
+                world.get::<&mut CsgNode>(r).unwrap().children.push(c);
+            }
+        }
+        assert!(sync_scene(&mut world, &mut scene).unwrap());
+        assert!(!sync_scene(&mut world, &mut scene).unwrap(), "nothing changed, nothing baked");
+        if round % 10 == 9 {
+            let fresh = RenderScene::from_world(&world).unwrap();
+            compare(&scene, &fresh, &mut rng, &format!("seed {seed} round {round}"));
+            compare_pictures(&scene, &fresh, &format!("seed {seed} round {round}"));
+        }
+    }
+    let c = scene.live.as_ref().unwrap().counts;
+    println!("{c:?}");
+    assert!(c.partial >= 60 && c.in_place > 0 && c.appended > 0 && c.rebuilds > 0, "every path ran: {c:?}");
+}

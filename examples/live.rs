@@ -1,0 +1,253 @@
+//! A live scene: N objects (each a box minus a sphere) in the tool's own
+//! `hecs::World`, some moving every frame; each frame syncs the baked scene
+//! and picks once. Prints medians of the sync and pick times (CPU time of
+//! the process; `ROTHRAY_WALL=1` for wall time).
+//!
+//! ```text
+//! cargo run --release --example live                       # 10 000 objects, 100 moving, 100 frames
+//! cargo run --release --example live -- --objects 100000 --moving 1
+//! cargo run --release --example live -- --frames 1000      # and the trace speed after them
+//! cargo run --release --example live -- --union 1000000    # memory: one union of N spheres
+//! cargo run --release --example live -- --union 1000000 --static 1   # the same by bake_scene
+//! ```
+
+use glam::{DAffine3, DVec3, Vec3};
+use hecs::{Entity, World};
+use rand::{rngs::SmallRng, Rng, SeedableRng};
+use rothray::engine::*;
+
+struct Args {
+    objects: usize,
+    moving: usize,
+    frames: usize,
+    union: usize,
+    /// `--static 1`: the union baked by `bake_scene` (no sync state).
+    fixed: bool,
+}
+
+fn parse_args() -> Args {
+    let mut a = Args { objects: 10_000, moving: 100, frames: 100, union: 0, fixed: false };
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    for pair in argv.chunks(2) {
+        let v = pair.get(1).and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{}: a number please", pair[0]));
+        match pair[0].as_str() {
+            "--objects" => a.objects = v,
+            "--moving" => a.moving = v,
+            "--frames" => a.frames = v,
+            "--union" => a.union = v,
+            "--static" => a.fixed = v != 0,
+            o => panic!("unknown option {o}"),
+        }
+    }
+    a
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// A point in time: the process's CPU time (all threads), or wall time with
+/// `ROTHRAY_WALL=1`. CPU time, because the figures are taken on machines
+/// shared with other jobs, where wall time varied by 2x from run to run.
+#[derive(Clone, Copy)]
+struct Instant(f64);
+
+impl Instant {
+    fn now() -> Instant {
+        if std::env::var_os("ROTHRAY_WALL").is_some() {
+            static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+            return Instant(START.get_or_init(std::time::Instant::now).elapsed().as_secs_f64() * 1e3);
+        }
+        let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: `ts` is a valid out-pointer for the call.
+        unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+        Instant(ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6)
+    }
+}
+
+/// Milliseconds since `t`.
+fn ms(t: Instant) -> f64 {
+    Instant::now().0 - t.0
+}
+
+/// `VmHWM` (peak) and `VmRSS` of this process in bytes (Linux).
+fn rss() -> (u64, u64) {
+    let s = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |name: &str| {
+        s.lines().find(|l| l.starts_with(name)).and_then(|l| l.split_whitespace().nth(1)).and_then(|k| k.parse::<u64>().ok()).unwrap_or(0)
+            * 1024
+    };
+    (field("VmHWM:"), field("VmRSS:"))
+}
+
+/// Side of the cube the objects fill (about 3 units apart).
+fn extent(n: usize) -> f32 {
+    3.0 * (n as f32).cbrt()
+}
+
+fn spawn_objects(world: &mut World, n: usize, rng: &mut SmallRng) -> Vec<Entity> {
+    let side = extent(n);
+    (0..n)
+        .map(|_| {
+            let p = Vec3::new(rng.gen_range(0.0..side), rng.gen_range(0.0..side), rng.gen_range(0.0..side));
+            let b = world.spawn((Cuboid { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) },));
+            let s = world.spawn((Transform::from_translation(Vec3::new(0.0, 0.0, 0.8)), Sphere { center: Vec3::ZERO, radius: 1.2 }));
+            world.spawn((CsgNode::difference([b, s]), Transform::from_translation(p)))
+        })
+        .collect()
+}
+
+/// Moves `k` random objects by up to half a unit; returns them.
+fn move_some(world: &mut World, roots: &[Entity], k: usize, rng: &mut SmallRng) -> Vec<Entity> {
+    let moved: Vec<Entity> = (0..k).map(|_| roots[rng.gen_range(0..roots.len())]).collect();
+    for &r in &moved {
+        let mut t = world.get::<&mut Transform>(r).unwrap();
+        let d = DVec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5));
+        t.0 = DAffine3::from_translation(d) * t.0;
+    }
+    moved
+}
+
+/// A pick: the ray from a corner of the scene through a random object.
+fn pick_ray(scene: &RenderScene, rng: &mut SmallRng) -> Ray {
+    let o = scene.bounds.max + Vec3::splat(5.0);
+    let target = scene.objects[rng.gen_range(0..scene.objects.len())].bounds.center();
+    Ray::new(o, target - o)
+}
+
+fn live(a: &Args) {
+    let mut rng = SmallRng::seed_from_u64(13);
+    let mut world = World::new();
+    let roots = spawn_objects(&mut world, a.objects, &mut rng);
+    let mut scene = RenderScene::default();
+    let t = Instant::now();
+    sync_scene(&mut world, &mut scene).unwrap();
+    println!("{} objects, first sync {:.1} ms", a.objects, ms(t));
+    let t = Instant::now();
+    let fresh = RenderScene::from_world(&world).unwrap();
+    println!("full bake (bake_scene): {:.1} ms", ms(t));
+    drop(fresh);
+
+    // Each case twice: `sync_scene` (compares every entity with the last
+    // sync's copy) and `sync_scene_touched` (only the entities listed).
+    for listed in [false, true] {
+        let how = if listed { "sync_scene_touched" } else { "sync_scene" };
+        let sync = |world: &mut World, scene: &mut RenderScene, touched: &[Entity]| {
+            if listed {
+                sync_scene_touched(world, scene, touched).unwrap()
+            } else {
+                sync_scene(world, scene).unwrap()
+            }
+        };
+        let (mut idle, mut one) = (Vec::new(), Vec::new());
+        for _ in 0..a.frames.max(1) {
+            let t = Instant::now();
+            assert!(!sync(&mut world, &mut scene, &[]));
+            idle.push(ms(t));
+            let moved = move_some(&mut world, &roots, 1, &mut rng);
+            let t = Instant::now();
+            sync(&mut world, &mut scene, &moved);
+            let hit = scene.intersect(&pick_ray(&scene, &mut rng));
+            one.push(ms(t));
+            std::hint::black_box(hit);
+        }
+        println!("{how}: nothing changed: median {:.3} ms", median(&mut idle));
+        println!("{how}: move 1, sync, pick: median {:.3} ms", median(&mut one));
+
+        let (mut synced, mut pick) = (Vec::new(), Vec::new());
+        let mut hits = 0;
+        for _ in 0..a.frames {
+            let moved = move_some(&mut world, &roots, a.moving, &mut rng);
+            let t = Instant::now();
+            sync(&mut world, &mut scene, &moved);
+            synced.push(ms(t));
+            let ray = pick_ray(&scene, &mut rng);
+            let t = Instant::now();
+            let hit = scene.intersect(&ray);
+            pick.push(ms(t));
+            hits += hit.is_some() as usize;
+        }
+        if a.frames > 0 {
+            let (s, p) = (median(&mut synced), median(&mut pick));
+            println!("{how}: move {}, sync: median {s:.3} ms; pick: median {p:.4} ms ({hits} of {} picks hit)", a.moving, a.frames);
+        }
+    }
+    // After all those frames of refits: the live trees against fresh ones.
+    trace_speed(&world, &scene, &mut rng);
+
+    move_some(&mut world, &roots, a.objects, &mut rng);
+    let t = Instant::now();
+    sync_scene(&mut world, &mut scene).unwrap();
+    println!("move all {}, sync: {:.1} ms", a.objects, ms(t));
+    let (peak, now) = rss();
+    println!("peak RSS {:.1} MB, RSS {:.1} MB", peak as f64 / 1e6, now as f64 / 1e6);
+}
+
+/// Traces the same rays through the live scene (its objects' tree refit
+/// frame after frame) and a fresh bake of the same world.
+fn trace_speed(world: &World, scene: &RenderScene, rng: &mut SmallRng) {
+    let fresh = RenderScene::from_world(world).unwrap();
+    let rays: Vec<Ray> = (0..20_000).map(|_| pick_ray(&fresh, rng)).collect();
+    let time = |s: &RenderScene| {
+        let mut best = f64::INFINITY;
+        let mut n = 0;
+        for _ in 0..3 {
+            let t = Instant::now();
+            n = rays.iter().filter(|r| s.intersect(r).is_some()).count();
+            best = best.min(ms(t));
+        }
+        (best, n)
+    };
+    let (tl, nl) = time(scene);
+    let (tf, nf) = time(&fresh);
+    assert_eq!(nl, nf, "the live scene and a fresh bake hit as often");
+    println!("20 000 picks (best of 3): live scene {tl:.1} ms, fresh bake {tf:.1} ms ({:.2}x)", tl / tf);
+}
+
+/// Memory: one union of `n` spheres, baked once (by `sync_scene`, or by
+/// `bake_scene` when `fixed`).
+fn union(n: usize, fixed: bool) {
+    let mut rng = SmallRng::seed_from_u64(13);
+    let mut world = World::new();
+    let side = extent(n);
+    let kids: Vec<Entity> = (0..n)
+        .map(|_| {
+            let c = Vec3::new(rng.gen_range(0.0..side), rng.gen_range(0.0..side), rng.gen_range(0.0..side));
+            world.spawn((Sphere { center: c, radius: 1.0 },))
+        })
+        .collect();
+    world.spawn((CsgNode::union(kids),));
+    let (_, before) = rss();
+    let mut scene = RenderScene::default();
+    let t = Instant::now();
+    if fixed {
+        bake_scene(&world, &mut scene).unwrap();
+    } else {
+        sync_scene(&mut world, &mut scene).unwrap();
+    }
+    let bake = ms(t);
+    let (peak, after) = rss();
+    println!(
+        "union of {n} spheres: {} {bake:.0} ms; RSS {:.0} MB before the sync, {:.0} MB after, peak {:.0} MB",
+        if fixed { "bake_scene" } else { "sync_scene" },
+        before as f64 / 1e6,
+        after as f64 / 1e6,
+        peak as f64 / 1e6
+    );
+    println!(
+        "per leaf: {:.0} bytes kept by the scene{}, {:.0} bytes at the peak",
+        (after - before) as f64 / n as f64,
+        if fixed { "" } else { " and its sync state" },
+        (peak - before) as f64 / n as f64
+    );
+}
+
+fn main() {
+    let a = parse_args();
+    if a.union > 0 {
+        union(a.union, a.fixed);
+    } else {
+        live(&a);
+    }
+}
