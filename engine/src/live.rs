@@ -369,6 +369,7 @@ fn copy_leaves(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
         };
         put(&mut dst.kind, b, src.kind[a]);
         put(&mut dst.to_local, b, src.to_local[a]);
+        put(&mut dst.anchor, b, src.anchor[a]);
         put(&mut dst.p0, b, src.p0[a]);
         put(&mut dst.p1, b, src.p1[a]);
         put(&mut dst.bounds, b, src.bounds[a]);
