@@ -68,6 +68,14 @@ fn random_scene(rng: &mut SmallRng, case: u32) -> (Vec<Shape>, rothray::engine::
     (trees, scene)
 }
 
+/// A tile's region: the pyramid from `o` around the unit direction `d`, its
+/// edge directions `d ± a u ± b v`, with those edges.
+fn pyramid_around(o: DVec3, d: DVec3, (a, b): (f64, f64)) -> ([DVec3; 4], Frustum) {
+    let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
+    let e = [d + u * a + v * b, d - u * a + v * b, d - u * a - v * b, d + u * a - v * b];
+    (e, Frustum::pyramid(o.as_vec3(), e.map(|x| x.as_vec3())))
+}
+
 /// The hit of a ray compared bit for bit, normal included.
 fn key(h: Option<rothray::engine::Hit>) -> Option<(u32, u32, u32, u32, [u32; 3])> {
     h.map(|h| (h.t.to_bits(), h.object, h.leaf, h.sub, h.normal.to_array().map(f32::to_bits)))
@@ -88,10 +96,8 @@ fn tile_programs_give_every_ray_the_whole_programs_answer() {
                 let d = d.normalize();
                 // A tile: a narrow pyramid around d (sometimes wide enough to
                 // cut through several objects).
-                let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
-                let (a, b) = if t % 3 == 0 { (0.3, 0.2) } else { (rng.gen_range(0.002..0.05), rng.gen_range(0.002..0.05)) };
-                let e = [d + u * a + v * b, d - u * a + v * b, d - u * a - v * b, d + u * a - v * b];
-                let region = Frustum::pyramid(o.as_vec3(), e.map(|x| x.as_vec3()));
+                let half = if t % 3 == 0 { (0.3, 0.2) } else { (rng.gen_range(0.002..0.05), rng.gen_range(0.002..0.05)) };
+                let (e, region) = pyramid_around(o, d, half);
                 tiles += 1;
                 let any = scene.prepare_tile(&region, &mut ts);
                 culled += (!any) as u64;
@@ -217,10 +223,8 @@ fn tiles_of_many_objects_keep_ties_between_objects() {
             for t in 0..16 {
                 let (o, d) = random_ray(&mut rng);
                 let d = d.normalize();
-                let (u, v) = (d.any_orthonormal_vector(), d.cross(d.any_orthonormal_vector()).normalize());
-                let (a, b) = if t % 2 == 0 { (0.6, 0.5) } else { (rng.gen_range(0.01..0.1), rng.gen_range(0.01..0.1)) };
-                let e = [d + u * a + v * b, d - u * a + v * b, d - u * a - v * b, d + u * a - v * b];
-                let region = Frustum::pyramid(o.as_vec3(), e.map(|x| x.as_vec3()));
+                let half = if t % 2 == 0 { (0.6, 0.5) } else { (rng.gen_range(0.01..0.1), rng.gen_range(0.01..0.1)) };
+                let (e, region) = pyramid_around(o, d, half);
                 if !scene.prepare_tile(&region, &mut ts) {
                     continue;
                 }
