@@ -267,7 +267,7 @@ fn leaf_spans<S: SpanSink + ?Sized>(
             return v;
         }
     }
-    leaves.spans_for(i, &ctx.ray.with_range(lo, hi), nearest, out)
+    leaves.spans_for(i, &ctx.ray, (lo, hi), nearest, out)
 }
 
 /// What a frameless evaluation reads: the leaves, the ray and the mode.

@@ -531,7 +531,17 @@ impl LeafTable {
     /// into `out` (sorted, disjoint). Clipped ends carry [`Surf::NONE`].
     #[inline]
     pub fn spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, out: &mut S) {
-        let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
+        self.spans_in(i, ray, (ray.tmin, ray.tmax), out)
+    }
+
+    /// [`LeafTable::spans`] on `range` instead of the ray's own range. The
+    /// evaluator asks each leaf on a range of its own: a copy of the ray per
+    /// leaf query, written just before the kernel loads its origin as one
+    /// 16-byte vector, stalled on store forwarding (scenes/nesting traced
+    /// 12-17% slower at the same instruction count).
+    #[inline]
+    pub fn spans_in<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
+        let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
@@ -568,29 +578,29 @@ impl LeafTable {
         }
     }
 
-    /// [`LeafTable::spans`], or, when `nearest` is `Some(slack)`, what a
+    /// [`LeafTable::spans_in`], or, when `nearest` is `Some(slack)`, what a
     /// nearest-hit query needs: leaves whose full span list is costly (meshes)
     /// may stop `slack` (in t) past their first entry. The spans pushed are exact
     /// on `[tmin, v]` and none lies past `v`, the value returned (infinity when
     /// the answer is the full one).
     #[inline(always)]
-    pub fn spans_for<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, nearest: Option<f32>, out: &mut S) -> f32 {
+    pub fn spans_for<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, range: (f32, f32), nearest: Option<f32>, out: &mut S) -> f32 {
         if let Some(slack) = nearest {
             if self.kind[i as usize] == LeafKind::Mesh {
-                return self.mesh_nearest(i, ray, slack, out);
+                return self.mesh_nearest(i, ray, range, slack, out);
             }
         }
-        self.spans(i, ray, out);
+        self.spans_in(i, ray, range, out);
         f32::INFINITY
     }
 
     #[inline(never)]
-    fn mesh_nearest<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, slack: f32, out: &mut S) -> f32 {
+    fn mesh_nearest<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), slack: f32, out: &mut S) -> f32 {
         let iu = i as usize;
         let m = &self.to_local[iu];
         let mesh = &self.meshes[self.ext[iu] as usize];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(ray.origin) - self.anchor[iu]).into();
-        let local = Ray::segment(lo, m.transform_vector3(ray.dir), ray.tmin, ray.tmax);
+        let local = Ray::segment(lo, m.transform_vector3(ray.dir), tmin, tmax);
         mesh.spans_nearest(&local, slack, i, out)
     }
 
