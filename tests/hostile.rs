@@ -419,24 +419,11 @@ fn a_30000_index_face_is_triangulated_into_a_closed_solid() {
     assert!((vol - std::f64::consts::PI).abs() < 1e-3, "volume {vol}");
 }
 
-/// A comb face of `teeth` teeth of pseudo-random heights (from `seed`), on
-/// integer coordinates, as OBJ: 3 teeth + 2 vertices, counter-clockwise.
+/// The comb face of [`crate::comb_face::comb_obj`] as an OBJ file's text.
 fn comb_face_obj(teeth: usize, seed: u64) -> String {
-    let mut p: Vec<[i64; 2]> = vec![[2 * teeth as i64, 0]];
-    let mut h = seed;
-    for t in (0..teeth as i64).rev() {
-        h = h.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        let y = 2 + (h >> 61) as i64;
-        p.push([2 * t + 2, y]);
-        p.push([2 * t + 1, y]);
-        p.push(if t > 0 { [2 * t + 1, 1] } else { [0, y] });
-    }
-    p.push([0, 0]);
-    let mut s: String = p.iter().map(|q| format!("v {} {} 0\n", q[0], q[1])).collect();
-    s.push('f');
-    s.extend((1..=p.len()).map(|k| format!(" {k}")));
-    s.push('\n');
-    s
+    let (v, face, _) = crate::comb_face::comb_obj(teeth, seed);
+    let f: String = face.iter().map(|k| format!(" {k}")).collect();
+    format!("{v}f{f}\n")
 }
 
 /// The 1 000 000-index face, as a comb (333 333 merge vertices, no

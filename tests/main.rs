@@ -8,6 +8,8 @@ mod assimp_corpus;
 mod bad_input;
 mod cli;
 mod coincident;
+#[path = "../io/src/comb_face.rs"]
+mod comb_face;
 mod csg_oracle;
 mod hostile;
 mod leaf_oracle;

@@ -12,6 +12,8 @@
 
 #[cfg(test)]
 mod assimp_corpus;
+#[cfg(test)]
+mod comb_face;
 pub mod files;
 pub mod json;
 pub mod json_path;

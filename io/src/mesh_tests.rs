@@ -1,4 +1,5 @@
 use super::*;
+use crate::comb_face::comb_obj;
 use std::path::PathBuf;
 
 /// A fresh scratch directory for one test.
@@ -343,25 +344,6 @@ fn mesh_assimp_testmodels_do_not_panic() {
         panicked.len()
     );
     assert!(panicked.is_empty(), "panicked on {panicked:?}");
-}
-
-/// A comb face of `teeth` teeth (heights from `seed`), on integer coordinates:
-/// 3 teeth + 2 vertices, counter-clockwise. Returns the OBJ `v` lines, the
-/// face's index list, and its shoelace area.
-fn comb_obj(teeth: usize, seed: u64) -> (String, Vec<usize>, f64) {
-    let mut p: Vec<[i64; 2]> = vec![[2 * teeth as i64, 0]];
-    let mut h = seed;
-    for t in (0..teeth as i64).rev() {
-        h = h.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        let y = 2 + (h >> 61) as i64;
-        p.push([2 * t + 2, y]);
-        p.push([2 * t + 1, y]);
-        p.push(if t > 0 { [2 * t + 1, 1] } else { [0, y] });
-    }
-    p.push([0, 0]);
-    let area = (0..p.len()).map(|i| (p[i][0] * p[(i + 1) % p.len()][1] - p[i][1] * p[(i + 1) % p.len()][0]) as f64).sum::<f64>() * 0.5;
-    let v: String = p.iter().map(|q| format!("v {} {} 0\n", q[0], q[1])).collect();
-    (v, (1..=p.len()).collect(), area)
 }
 
 /// A 1 000 001-index comb face through the OBJ loader: n - 2 triangles, none
