@@ -11,10 +11,14 @@
 //! cargo run --release --example live -- --union 1000000 --static 1   # the same by bake_scene
 //! ```
 
-use glam::{DAffine3, DVec3, Vec3};
+use glam::Vec3;
 use hecs::{Entity, World};
 use rand::{rngs::SmallRng, Rng, SeedableRng};
 use rothray::engine::*;
+
+#[path = "live_world/mod.rs"]
+mod live_world;
+use live_world::{extent, move_some, pick_ray, spawn_objects};
 
 struct Args {
     objects: usize,
@@ -79,41 +83,6 @@ fn rss() -> (u64, u64) {
             * 1024
     };
     (field("VmHWM:"), field("VmRSS:"))
-}
-
-/// Side of the cube the objects fill (about 3 units apart).
-fn extent(n: usize) -> f32 {
-    3.0 * (n as f32).cbrt()
-}
-
-fn spawn_objects(world: &mut World, n: usize, rng: &mut SmallRng) -> Vec<Entity> {
-    let side = extent(n);
-    (0..n)
-        .map(|_| {
-            let p = Vec3::new(rng.gen_range(0.0..side), rng.gen_range(0.0..side), rng.gen_range(0.0..side));
-            let b = world.spawn((Cuboid { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) },));
-            let s = world.spawn((Transform::from_translation(Vec3::new(0.0, 0.0, 0.8)), Sphere { center: Vec3::ZERO, radius: 1.2 }));
-            world.spawn((CsgNode::difference([b, s]), Transform::from_translation(p)))
-        })
-        .collect()
-}
-
-/// Moves `k` random objects by up to half a unit; returns them.
-fn move_some(world: &mut World, roots: &[Entity], k: usize, rng: &mut SmallRng) -> Vec<Entity> {
-    let moved: Vec<Entity> = (0..k).map(|_| roots[rng.gen_range(0..roots.len())]).collect();
-    for &r in &moved {
-        let mut t = world.get::<&mut Transform>(r).unwrap();
-        let d = DVec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5));
-        t.0 = DAffine3::from_translation(d) * t.0;
-    }
-    moved
-}
-
-/// A pick: the ray from a corner of the scene through a random object.
-fn pick_ray(scene: &RenderScene, rng: &mut SmallRng) -> Ray {
-    let o = scene.bounds.max + Vec3::splat(5.0);
-    let target = scene.objects[rng.gen_range(0..scene.objects.len())].bounds.center();
-    Ray::new(o, target - o)
 }
 
 fn live(a: &Args) {
