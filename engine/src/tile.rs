@@ -26,10 +26,8 @@ pub struct TileScratch {
     root_of: Vec<u32>,
     /// The objects given a root in the current tile.
     live: Vec<u32>,
-    /// The bounded ones among them, by index, when there are at most
-    /// [`OBJECT_LIST`] (else empty, and `listed` is false).
-    bounded: Vec<u32>,
-    /// Their boxes, as the rays test them.
+    /// The boxes of the bounded ones among them, by index, as the rays test
+    /// them, when there are at most [`OBJECT_LIST`] (`listed`).
     boxes: BoxList,
     listed: bool,
     /// Program the tables above were made for.
@@ -135,15 +133,14 @@ impl RenderScene {
         self.objects_cull().cull(|b| region.touches_box(b), &mut keep);
         // The unbounded objects kept come first.
         let unbounded = ts.live.iter().take_while(|&&oi| !self.objects[oi as usize].bounds.is_finite()).count();
-        ts.bounded.clear();
         ts.listed = ts.live.len() - unbounded <= OBJECT_LIST;
-        if ts.listed {
-            ts.bounded.extend_from_slice(&ts.live[unbounded..]);
-            ts.bounded.sort_unstable();
-        }
         ts.boxes.clear();
-        for &oi in &ts.bounded {
-            ts.boxes.push(&self.objects[oi as usize].bounds, oi);
+        if ts.listed {
+            // By index (`live` is only a list of what to reset).
+            ts.live[unbounded..].sort_unstable();
+            for &oi in &ts.live[unbounded..] {
+                ts.boxes.push(&self.objects[oi as usize].bounds, oi);
+            }
         }
         let TileScratch { live, counts, .. } = ts;
         counts.tiles += 1;
