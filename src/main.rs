@@ -561,6 +561,8 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "leaves_asked_per_ray": per(st.eval.leaves, rays),
         "wide_children_visited": st.eval.wide_children,
         "early_outs": st.eval.early_outs,
+        "packet_union_lanes": st.eval.packet_lanes,
+        "packet_union_misses": st.eval.packet_misses,
     })
 }
 

@@ -255,3 +255,125 @@ fn tiles_of_many_objects_keep_ties_between_objects() {
     println!("{rays} rays, {hits} hits; tiles listing their objects {listed}, walking the tree {walked}");
     assert!(listed > 20 && walked > 20 && hits > rays / 4, "both kinds of tile and enough hits are needed to test");
 }
+
+/// A union of many small leaves (every kind, half-spaces, transforms with
+/// shear, exact copies and boxes sharing faces): what a tile's packets walk
+/// together ([`rothray::csg::Program::record_union8`]).
+fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
+    let mut kids: Vec<Shape> = Vec::with_capacity(n + 4);
+    for _ in 0..n {
+        let c = rp(rng, spread);
+        let s = match rng.gen_range(0..4) {
+            0 => Shape::Sphere { c, r: rng.gen_range(0.03..0.3) },
+            1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.4)) },
+            2 => Shape::Cone { a: c, b: c + DVec3::new(0.0, rng.gen_range(0.1..0.6), 0.0), ra: rng.gen_range(0.05..0.3), rb: 0.0 },
+            _ => {
+                let planes = rng.gen_bool(0.05);
+                match random_leaf(rng, planes) {
+                    Shape::Plane { n, d } => Shape::Plane { n, d },
+                    other => random_xf(rng, other),
+                }
+            }
+        };
+        kids.push(if rng.gen_bool(0.2) { random_xf(rng, s) } else { s });
+    }
+    for _ in 0..rng.gen_range(0..5) {
+        let k = rng.gen_range(0..kids.len());
+        let twin = match &kids[k] {
+            Shape::Box { min, max } if rng.gen_bool(0.5) => {
+                let w = max.x - min.x;
+                Shape::Box { min: *min + DVec3::new(w, 0.0, 0.0), max: *max + DVec3::new(w, 0.0, 0.0) }
+            }
+            other => other.clone(),
+        };
+        let at = rng.gen_range(0..=kids.len());
+        kids.insert(at, twin);
+    }
+    Shape::Union(kids)
+}
+
+/// Packets of a tile walk its wide unions of leaves together, and every
+/// ray still gets exactly (bit for bit) what it gets alone: camera packets
+/// (one origin) and packets of parallel rays from a box of origins (a
+/// tile's shadow rays), in scenes with other objects in front and behind,
+/// a ground plane, and meshes in some (which take the mesh packet path
+/// too). The packet walks must answer most lanes for the test to mean
+/// anything.
+#[test]
+fn packets_walk_wide_unions_together() {
+    let (mut rays, mut hits) = (0u64, 0u64);
+    let _ = rothray::csg::take_eval_counts();
+    for seed in 0..100u64 {
+        let seed = 0x3a11 + seed;
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..16 {
+            let n = rng.gen_range(20..200);
+            let mut trees = vec![many_leaf_union(&mut rng, n, 2.0)];
+            if rng.gen_bool(0.5) {
+                let n = rng.gen_range(10..60);
+                trees.push(many_leaf_union(&mut rng, n, 1.0));
+            }
+            if rng.gen_bool(0.4) {
+                trees.push(random_tree_with(&mut rng, 2, case % 4 == 0));
+            }
+            if rng.gen_bool(0.3) {
+                trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.5 });
+            }
+            let scene = bake(&trees);
+            remove_mesh_files(&trees);
+            let mut ps = PacketScratch::default();
+            let mut ts = TileScratch::default();
+            for t in 0..16 {
+                let (o, d) = random_ray(&mut rng);
+                let d = d.normalize();
+                let half = if t % 2 == 0 { (0.15, 0.1) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
+                let shadow = t % 4 == 3;
+                let (packet, region): (Vec<Ray>, Frustum) = if shadow {
+                    // Parallel rays from a box of origins.
+                    let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
+                    let org = rothray::primitives::Aabb::new((o - h).as_vec3(), (o + h).as_vec3());
+                    let rays = (0..8)
+                        .map(|_| {
+                            to_ray(o + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h, d)
+                        })
+                        .collect();
+                    (rays, Frustum::sweep(&org, d.as_vec3()))
+                } else {
+                    let (e, region) = pyramid_around(o, d, half);
+                    let rays = (0..8)
+                        .map(|k| {
+                            let (s, w) =
+                                if k < 4 { ((k % 2) as f64, (k / 2) as f64) } else { (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) };
+                            let dir = (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w;
+                            to_ray(o, dir * rng.gen_range(0.5..2.0))
+                        })
+                        .collect();
+                    (rays, region)
+                };
+                let mut out = [None; 8];
+                if scene.prepare_tile(&region, &mut ts) {
+                    let view = ts.view();
+                    scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
+                }
+                for k in 0..8 {
+                    let one = scene.intersect(&packet[k]);
+                    hits += one.is_some() as u64;
+                    assert_eq!(
+                        key(out[k]),
+                        key(one),
+                        "seed {seed:#x} case {case} tile {t} ray {k}: {:?} trees {:?}",
+                        packet[k],
+                        trees.iter().map(|t| t.json()).collect::<Vec<_>>()
+                    );
+                    rays += 1;
+                }
+            }
+        }
+    }
+    let c = rothray::csg::take_eval_counts();
+    println!(
+        "{rays} rays, {hits} hits; wide-union evaluations answered by packet walks {}, not answered {}",
+        c.packet_lanes, c.packet_misses
+    );
+    assert!(hits > rays / 5 && c.packet_lanes > rays / 3, "too few hits or packet-walked lanes to test");
+}

@@ -9,6 +9,8 @@ thread_local! {
     static LEAVES: Cell<u64> = const { Cell::new(0) };
     static WIDE: Cell<u64> = const { Cell::new(0) };
     static EARLY: Cell<u64> = const { Cell::new(0) };
+    static PACKET_SERVED: Cell<u64> = const { Cell::new(0) };
+    static PACKET_MISSED: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -21,6 +23,12 @@ pub struct EvalCounts {
     /// Roth's early outs taken: an intersection stopped at an empty operand, a
     /// difference at an empty positive operand.
     pub early_outs: u64,
+    /// Wide-union evaluations answered by their packet's walk
+    /// ([`crate::Program::record_union8`]).
+    pub packet_lanes: u64,
+    /// Wide-union evaluations of a packet lane that its packet's record did
+    /// not answer (another range: the lane walked on its own).
+    pub packet_misses: u64,
 }
 
 impl EvalCounts {
@@ -29,6 +37,8 @@ impl EvalCounts {
         self.leaves += o.leaves;
         self.wide_children += o.wide_children;
         self.early_outs += o.early_outs;
+        self.packet_lanes += o.packet_lanes;
+        self.packet_misses += o.packet_misses;
     }
 }
 
@@ -52,11 +62,18 @@ pub(crate) fn early_out() {
     bump(&EARLY);
 }
 
+#[inline(always)]
+pub(crate) fn packet_lane(served: bool) {
+    bump(if served { &PACKET_SERVED } else { &PACKET_MISSED });
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
         leaves: LEAVES.with(|c| c.replace(0)),
         wide_children: WIDE.with(|c| c.replace(0)),
         early_outs: EARLY.with(|c| c.replace(0)),
+        packet_lanes: PACKET_SERVED.with(|c| c.replace(0)),
+        packet_misses: PACKET_MISSED.with(|c| c.replace(0)),
     }
 }

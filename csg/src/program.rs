@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use rothray_primitives::{
+    box_wide::BoxWide,
     bvh::FlatBvh,
     polytope::{polytope_box, Plane},
     table::push_clipped,
@@ -53,6 +54,9 @@ pub struct Wide {
     /// which children their rays can meet; the `CwBvh` of `bvh` has no such
     /// query).
     pub cull: FlatBvh,
+    /// `cull` collapsed to four children per node, for packets of eight
+    /// rays ([`Program::record_union8`]); empty in a tile's own wide nodes.
+    pub packet: BoxWide,
 }
 
 /// All CSG trees of a scene, SoA, children before parents.
@@ -159,8 +163,9 @@ pub struct PacketMemo {
     len: usize,
 }
 
+/// One leaf's (or, with [`UNION_KEY`], one wide union's) record.
 #[derive(Debug, Default)]
-struct MemoLeaf {
+pub(crate) struct MemoLeaf {
     leaf: u32,
     /// Lanes whose result is here.
     done: u32,
@@ -214,6 +219,31 @@ impl PacketMemo {
         m & e.done
     }
 
+    /// Lane `k`'s result of wide leaf union `node` in nearest mode on `[lo, hi]`
+    /// (appended to `out`) and where it stops being exact, when the packet's
+    /// record answers that query exactly as the lane's own walk would: the
+    /// record starts at `lo`, covers `hi`, and either became exact-limited
+    /// before `hi` (its first confirmed entry; the walk on the shorter range
+    /// confirms the same one, the union's result not depending on the order
+    /// of its operands) or found nothing at all.
+    #[inline]
+    pub(crate) fn serve_union(&self, k: usize, node: u32, (lo, hi): (f32, f32), out: &mut SpanList) -> Option<f32> {
+        let e = self.entry(UNION_KEY | node)?;
+        if e.done & (1 << k) == 0 || lo != e.tmin[k] || hi > e.tmax[k] {
+            counts::packet_lane(false);
+            return None;
+        }
+        let (v, spans) = (e.valid[k], &e.spans[k]);
+        if v <= hi {
+            out.0.extend_from_slice(spans);
+        } else if !(spans.is_empty() && v == f32::INFINITY) {
+            counts::packet_lane(false);
+            return None;
+        }
+        counts::packet_lane(true);
+        Some(v)
+    }
+
     /// Every lane's record of `leaf` (one lookup for a packet's eight rays).
     #[inline]
     pub fn lanes(&self, leaf: u32) -> Option<MemoLanes<'_>> {
@@ -236,6 +266,9 @@ impl PacketMemo {
         Some(if v >= hi { f32::INFINITY } else { v })
     }
 }
+
+/// Memo key of a wide union node (leaf indices stay below it).
+pub(crate) const UNION_KEY: u32 = 1 << 31;
 
 /// The eight lanes' records of one leaf in a [`PacketMemo`].
 #[derive(Clone, Copy, Debug)]
@@ -272,18 +305,40 @@ fn leaf_spans<S: SpanSink + ?Sized>(
 
 /// What a frameless evaluation reads: the leaves, the ray and the mode.
 #[derive(Clone, Copy)]
-struct Ask<'a, 'm> {
+pub(crate) struct Ask<'a, 'm> {
     leaves: &'a LeafTable,
     ctx: &'a RayCtx<'m>,
     mode: Mode,
 }
 
 /// The span lists a frameless evaluation works in: one leaf's spans,
-/// `combine`'s scratch, and the result.
-struct Lists<'s> {
-    leaf: &'s mut SpanList,
-    tmp: &'s mut SpanList,
-    acc: &'s mut SpanList,
+/// `combine`'s scratch, and the result; and a wide union's candidates
+/// (pushed past the current end and truncated back).
+pub(crate) struct Lists<'s> {
+    pub(crate) leaf: &'s mut SpanList,
+    pub(crate) tmp: &'s mut SpanList,
+    pub(crate) acc: &'s mut SpanList,
+    pub(crate) cand: &'s mut Vec<(u32, f32)>,
+}
+
+/// One leaf's spans, `combine`'s scratch and the result (see [`Lists`]).
+pub(crate) type ListsRef<'a> = (&'a mut SpanList, &'a mut SpanList, &'a mut SpanList);
+
+/// Sorts candidates by entry, then position: a total order, so they are
+/// taken in the same order whichever tree listed them.
+#[inline]
+pub(crate) fn sort_cands(s: &mut [(u32, f32)]) {
+    if s.len() > 1 {
+        s.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    }
+}
+
+/// One ray's walk through a wide leaf union: the end of its working range,
+/// and where its result stops being exact.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct UnionLane {
+    pub(crate) hi: f32,
+    pub(crate) valid: f32,
 }
 
 struct Frame {
@@ -321,6 +376,10 @@ pub struct Scratch {
     pub out: SpanList,
     /// Point-classification values (post-order).
     bools: Vec<bool>,
+    /// Per packet lane, its result of a wide union walked for the packet,
+    /// and its candidates there.
+    lanes: Vec<SpanList>,
+    lane_cands: Vec<Vec<(u32, f32)>>,
     /// A caller's candidate list, `(entry t, id)` (the engine's objects along
     /// a ray), kept here so that it too is reused from ray to ray.
     pub cands: Vec<(f32, u32)>,
@@ -408,7 +467,10 @@ impl<'a> ProgramBuilder<'a> {
                 *x = ids[*x as usize];
             }
             wide = p.wides.len() as u32;
-            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, cull });
+            // The region tree collapsed for packets (a tree of obvhs' medium
+            // quality instead cost scenes/forest 6% more instructions).
+            let packet = BoxWide::from_binary(&cull.nodes, &cull.prims);
+            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, cull, packet });
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);
@@ -526,8 +588,8 @@ impl Program {
         }
         let ask = Ask { leaves, ctx, mode };
         if self.frameless(r) {
-            let Scratch { out, leaf, tmp, .. } = scratch;
-            return self.eval_frameless(r, ask, (tmin, tmax), Lists { leaf, tmp, acc: out }).min(tmax);
+            let Scratch { out, leaf, tmp, cand, .. } = scratch;
+            return self.eval_frameless(r, ask, (tmin, tmax), Lists { leaf, tmp, acc: out, cand }).min(tmax);
         }
         let base = scratch.frames.len();
         self.push_frame(root, (tmin, tmax), ctx, mode, scratch);
@@ -550,13 +612,13 @@ impl Program {
                     } else if self.frameless(c as usize) {
                         // Bottom-level inner node: evaluate in place, no frame.
                         let cu = c as usize;
-                        let Scratch { frames, accs, tmp, leaf, sub, .. } = scratch;
+                        let Scratch { frames, accs, tmp, leaf, sub, cand, .. } = scratch;
                         sub.clear();
                         let valid = if self.bounds[cu].ray_range(ctx.ray.origin, ctx.ray.inv_dir, ct0, ct1).is_none() {
                             f32::INFINITY
                         } else {
                             let ask = Ask { leaves, ctx, mode };
-                            self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub })
+                            self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub, cand })
                         };
                         self.absorb(&mut frames[top], &mut accs[top], tmp, (sub.as_slice(), valid), ctx.eps);
                     } else {
@@ -655,7 +717,7 @@ impl Program {
     /// nodes are like this: frames and their copies were ~40% of the trace time).
     fn leaf_node(&self, n: usize, ask: Ask, (tmin, tmax): (f32, f32), lists: Lists) -> f32 {
         let Ask { leaves, ctx, mode } = ask;
-        let Lists { leaf, tmp, acc } = lists;
+        let Lists { leaf, tmp, acc, .. } = lists;
         let kind = self.kind[n];
         let op = kind.op();
         let (first, count) = (self.first[n] as usize, self.count[n] as usize);
@@ -709,49 +771,93 @@ impl Program {
         valid
     }
 
-    /// A wide union of leaves in one front-to-back BVH walk. In nearest mode the
-    /// range shrinks to the first confirmed entry, which prunes the rest of the walk.
+    /// A wide union of leaves: its children along the ray taken in one
+    /// canonical order (by box entry, then position: [`Program::union_cands`]),
+    /// each visited while its box starts before the working range's end. In
+    /// nearest mode that end shrinks to the first confirmed entry, which
+    /// ends the walk. The order does not depend on the tree that listed the
+    /// children: regularisation (short spans dropped, boundaries fused) is
+    /// not associative, so a walk in another order could end a few eps
+    /// differently. A packet that walked the union for this ray already
+    /// ([`Program::record_union8`]) answers from its memo where its record
+    /// covers the query.
     fn leaf_union(&self, n: usize, ask: Ask, (tmin, tmax): (f32, f32), lists: Lists) -> f32 {
-        let Ask { leaves, ctx, mode } = ask;
-        let Lists { leaf, tmp, acc } = lists;
-        let w = self.wide_of(n);
-        let first = self.first[n];
-        // `hi`: the working range's end; `valid`: where the result stops being exact.
-        let mut hi = tmax;
-        let mut valid = f32::INFINITY;
-        let mut visit = |pos: u32, acc: &mut SpanList, hi: &mut f32, valid: &mut f32| {
-            counts::wide_child();
-            let c = self.children[(first + pos) as usize];
-            leaf.clear();
-            let v = leaf_spans(leaves, ctx, self.first[c as usize], (tmin, *hi), ctx.nearest(mode), leaf);
-            if v < *valid {
-                *valid = v;
-                *hi = hi.min(v);
-                acc.truncate_at(v);
+        let Lists { leaf, tmp, acc, cand } = lists;
+        if let (Some((memo, k)), Mode::Nearest) = (ask.ctx.memo, ask.mode) {
+            if let Some(v) = memo.serve_union(k, n as u32, (tmin, tmax), acc) {
+                return v;
             }
-            if leaf.is_empty() {
-                return;
-            }
-            if acc.is_empty() {
-                acc.0.extend_from_slice(leaf.as_slice());
-            } else {
-                combine_into(Op::Union, acc, leaf.as_slice(), ctx.eps, tmp);
-            }
-            if mode != Mode::All {
-                if let Some(t) = stop_at_first_entry(acc, *hi, mode, ctx.eps) {
-                    *hi = t;
-                    *valid = t;
-                }
-            }
-        };
-        for &pos in &w.unbounded {
-            visit(pos, acc, &mut hi, &mut valid);
         }
-        w.bvh.traverse(ctx.ray.origin, ctx.ray.inv_dir, tmin, hi, |pos, _| {
-            visit(pos, acc, &mut hi, &mut valid);
-            hi
+        let base = cand.len();
+        self.union_cands(n, &ask.ctx.ray.with_range(tmin, tmax), cand);
+        let mut st = UnionLane { hi: tmax, valid: f32::INFINITY };
+        for i in base..cand.len() {
+            let (pos, t0) = cand[i];
+            if t0 > st.hi {
+                break;
+            }
+            self.union_visit(n, pos, ask, tmin, &mut st, (&mut *leaf, &mut *tmp, &mut *acc));
+        }
+        cand.truncate(base);
+        st.valid
+    }
+
+    /// Appends the children of wide union `n` whose boxes `ray`'s range
+    /// meets, with their box entries, sorted by entry, then position (the
+    /// unbounded ones enter at `tmin`).
+    fn union_cands(&self, n: usize, ray: &Ray, cand: &mut Vec<(u32, f32)>) {
+        let w = self.wide_of(n);
+        let base = cand.len();
+        for &pos in &w.unbounded {
+            cand.push((pos, ray.tmin));
+        }
+        w.bvh.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |pos, _| {
+            if let Some(t0) = self.child_entry(n, pos, ray) {
+                cand.push((pos, t0));
+            }
+            ray.tmax
         });
-        valid
+        sort_cands(&mut cand[base..]);
+    }
+
+    /// Where `ray` enters the box of child `pos` of node `n` within its range.
+    #[inline(always)]
+    pub(crate) fn child_entry(&self, n: usize, pos: u32, ray: &Ray) -> Option<f32> {
+        let c = self.children[(self.first[n] + pos) as usize];
+        self.bounds[c as usize].ray_range(ray.origin, ray.inv_dir, ray.tmin, ray.tmax).map(|r| r.0)
+    }
+
+    /// Visits child `pos` of wide leaf union `n` for one ray: its spans on
+    /// `[tmin, st.hi]` join the ray's result `lists.acc`; `st.hi` shrinks to
+    /// the first confirmed entry (nearest modes) and `st.valid` to where the
+    /// result stops being exact.
+    #[inline(always)]
+    pub(crate) fn union_visit(&self, n: usize, pos: u32, ask: Ask, tmin: f32, st: &mut UnionLane, lists: ListsRef) {
+        let Ask { leaves, ctx, mode } = ask;
+        let (leaf, tmp, acc) = lists;
+        counts::wide_child();
+        let c = self.children[(self.first[n] + pos) as usize];
+        leaf.clear();
+        let v = leaf_spans(leaves, ctx, self.first[c as usize], (tmin, st.hi), ctx.nearest(mode), leaf);
+        if v < st.valid {
+            st.valid = v;
+            st.hi = st.hi.min(v);
+            acc.truncate_at(v);
+        }
+        if leaf.is_empty() {
+            return;
+        }
+        if acc.is_empty() {
+            acc.0.extend_from_slice(leaf.as_slice());
+        } else {
+            combine_into(Op::Union, acc, leaf.as_slice(), ctx.eps, tmp);
+        }
+        if mode != Mode::All {
+            if let Some(t) = stop_at_first_entry(acc, st.hi, mode, ctx.eps) {
+                st.hi = t;
+                st.valid = t;
+            }
+        }
     }
 
     /// Candidates of wide node `n` (children at positions >= `skip`) along `[tmin, tmax]`,
@@ -774,13 +880,9 @@ impl Program {
                 cand.push((pos, tmin));
             }
         }
-        let s = &mut cand[lo..];
-        if s.len() > 1 {
-            // By entry, then by position: a total order, so the candidates are
-            // taken in the same order whichever tree listed them (a tile's
-            // short list or the baked BVH).
-            s.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-        }
+        // The same order whichever tree listed them (a tile's short list or
+        // the baked BVH).
+        sort_cands(&mut cand[lo..]);
     }
 
     /// The next child node to evaluate for frame `top`, or `None` when it is finished.
@@ -986,3 +1088,6 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
         None
     }
 }
+
+#[path = "union_packet.rs"]
+mod union_packet;

@@ -115,9 +115,10 @@ fn event(l: &[Span], k: usize) -> (f32, Surf) {
 /// * boundaries of `a` and `b` closer than `eps` are fused into one event at `a`'s
 ///   parameter (so coincident faces of different operands never leave slivers
 ///   or speckle; when both change the result at once, `a`'s surface wins, so the
-///   choice is the same on every pixel; a union takes the boundary of the lower
-///   leaf index, so that its result does not depend on the order of its
-///   operands);
+///   choice is the same on every pixel; a union keeps one of the two
+///   boundaries by a rule that does not look at which operand it came from,
+///   see `union_fuse`, so that its result does not depend on the order of
+///   its operands);
 /// * spans shorter than `eps` are dropped and spans closer than `eps` are merged;
 /// * surfaces of `b` that bound a difference are flipped.
 pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
@@ -172,10 +173,10 @@ pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
             // the tree's order), which makes its result independent of the
             // order operands are combined in: a wide union's BVH walk and a
             // tile's short list of the same children agree.
-            (t, surf) = if !sa.is_real() && sb.is_real() {
+            (t, surf) = if op == Op::Union {
+                union_fuse((ta, sa), (tb, sb))
+            } else if !sa.is_real() && sb.is_real() {
                 (ta, sb)
-            } else if op == Op::Union && sb.is_real() && sb.leaf_index() < sa.leaf_index() {
-                (tb, sb)
             } else {
                 (ta, sa)
             };
@@ -208,6 +209,23 @@ pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
         } else if t - start.0 > eps {
             out.push(Span { t0: start.0, t1: t, s0: start.1, s1: surf });
         }
+    }
+}
+
+/// The one boundary a union keeps of two it fuses, the same whichever
+/// operand each comes from, so that a union's result does not depend on
+/// the order its operands are combined in (a wide union's BVH walk, a
+/// tile's short list and a packet's walk of the same children agree): a
+/// real surface over a range end (no surface), of two real ones the lower
+/// leaf index's (the earlier operand in the tree's order), of two range
+/// ends the nearer.
+#[inline(always)]
+fn union_fuse(a: (f32, Surf), b: (f32, Surf)) -> (f32, Surf) {
+    match (a.1.is_real(), b.1.is_real()) {
+        (true, true) if b.1.leaf_index() < a.1.leaf_index() => b,
+        (true, _) => a,
+        (false, true) => b,
+        (false, false) => (a.0.min(b.0), a.1),
     }
 }
 

@@ -291,11 +291,16 @@ impl RenderScene {
         }
         let o = rays[0].origin;
         // `is_valid` for each ray, with the shared origin checked once.
-        let packet = n == 8
+        let meshes = n == 8
             && !self.packet_meshes.is_empty()
             && o.is_finite()
             && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax);
-        if !packet {
+        let unions = tile.map_or(&[][..], |t| t.unions);
+        if !meshes {
+            if n == 8 && !unions.is_empty() && rays.iter().all(Ray::is_valid) {
+                self.union_packet(rays, ps, out, normals, tile);
+                return;
+            }
             for k in 0..n {
                 out[k] =
                     if rays[k].is_valid() { self.intersect_ctx(&self.ray_ctx(&rays[k]), &mut ps.scratch, normals, tile) } else { None };
@@ -366,6 +371,12 @@ impl RenderScene {
                 return;
             }
         }
+        // The wide unions of the tile, walked for the packet's rays (their
+        // contexts without a memo: the walks fill it).
+        let plain: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: None });
+        for &r in unions {
+            tile.expect("unions come from a tile").prog.record_union8(&self.leaves, r, &plain, left, &mut ps.memo, &mut ps.scratch);
+        }
         // All eight contexts are written before the first is read: reading one
         // just built (its fields written piecewise, read with wider loads) stalls
         // on store forwarding.
@@ -389,6 +400,24 @@ impl RenderScene {
                 }
             }
             out[k] = self.intersect_ctx(&ctx[k], &mut ps.scratch, normals, tile);
+        }
+    }
+
+    /// [`RenderScene::intersect_packet_with`] for eight valid rays of a tile
+    /// that has objects packets walk together (wide unions of leaves) and no
+    /// packet meshes: the unions are walked for all eight rays, then each
+    /// ray is evaluated with those walks as memos.
+    fn union_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
+        let Some(t) = tile else { return };
+        let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
+        ps.memo.clear();
+        for &r in t.unions {
+            t.prog.record_union8(&self.leaves, r, &plain, 0xff, &mut ps.memo, &mut ps.scratch);
+        }
+        let memo = &ps.memo;
+        for k in 0..8 {
+            let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
+            out[k] = self.intersect_ctx(&ctx, &mut ps.scratch, normals, tile);
         }
     }
 

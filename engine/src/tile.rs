@@ -30,6 +30,10 @@ pub struct TileScratch {
     /// them, when there are at most [`OBJECT_LIST`] (`listed`).
     boxes: BoxList,
     listed: bool,
+    /// The roots (in `tp.prog`) of the objects kept whose tile program is a
+    /// wide union of leaves: a packet of the tile's rays walks them together
+    /// ([`Program::record_union8`]).
+    unions: Vec<u32>,
     /// Program the tables above were made for.
     program_id: u64,
     /// Counts since the last [`TileScratch::take_counts`].
@@ -71,6 +75,8 @@ pub struct TileView<'a> {
     root_of: &'a [u32],
     /// The bounded objects the tile meets, when it lists them.
     pub(crate) bounded: Option<&'a BoxList>,
+    /// Roots of the objects that packets walk together (see `TileScratch`).
+    pub(crate) unions: &'a [u32],
 }
 
 impl TileView<'_> {
@@ -92,7 +98,7 @@ impl TileView<'_> {
 impl TileScratch {
     /// The view of the tile last prepared.
     pub fn view(&self) -> TileView<'_> {
-        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(&self.boxes) }
+        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(&self.boxes), unions: &self.unions }
     }
 
     /// The counts so far, reset.
@@ -140,6 +146,13 @@ impl RenderScene {
             ts.live[unbounded..].sort_unstable();
             for &oi in &ts.live[unbounded..] {
                 ts.boxes.push(&self.objects[oi as usize].bounds, oi);
+            }
+        }
+        ts.unions.clear();
+        for &oi in &ts.live {
+            let r = ts.root_of[oi as usize];
+            if ts.tp.prog.is_packet_union(r) {
+                ts.unions.push(r);
             }
         }
         let TileScratch { live, counts, .. } = ts;

@@ -18,6 +18,7 @@
 #![warn(missing_docs)]
 
 pub mod aabb;
+pub mod box_wide;
 pub mod bvh;
 pub mod frustum;
 pub mod gcyl;

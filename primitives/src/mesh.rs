@@ -288,7 +288,7 @@ struct RayBox {
 /// Relative slack of the slab test: each slab parameter carries a few ulps of
 /// rounding, and a ray through a box corner (a mesh vertex) must not miss the box
 /// of the triangle that owns the crossing there.
-const SLAB_EPS: f32 = 1e-6;
+pub(crate) const SLAB_EPS: f32 = 1e-6;
 
 /// Traversal stack entries of the fixed-size walks (a 4-wide tree pushes at most
 /// three per level).
@@ -1672,7 +1672,7 @@ fn sort_crossings(xs: &mut [Crossing], first: impl Fn(&Crossing) -> bool) {
 }
 
 #[path = "mesh_wide.rs"]
-mod wide;
+pub(crate) mod wide;
 
 #[path = "mesh_selfx.rs"]
 mod selfx;

@@ -15,13 +15,13 @@ use super::{intersect, WoopRay, SLAB_EPS};
 use crate::bvh::BvhNode;
 
 /// Child code flag: the child is a leaf (the rest is its block index).
-pub(super) const LEAF: u32 = 1 << 31;
+pub(crate) const LEAF: u32 = 1 << 31;
 
 /// Four children: boxes as `[min_x, max_x, min_y, max_y, min_z, max_z]` lanes
 /// (empty slots have min = +inf, max = -inf and never hit), child codes.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-pub(super) struct Node4 {
+pub(crate) struct Node4 {
     b: [[f32; 4]; 6],
     child: [u32; 4],
 }
@@ -51,77 +51,21 @@ impl Wide {
         if bin.is_empty() || tris.is_empty() {
             return w;
         }
-        let empty = Node4 {
-            b: [
-                [f32::INFINITY; 4],
-                [f32::NEG_INFINITY; 4],
-                [f32::INFINITY; 4],
-                [f32::NEG_INFINITY; 4],
-                [f32::INFINITY; 4],
-                [f32::NEG_INFINITY; 4],
-            ],
-            child: [0; 4],
-        };
-        let half_area = |n: &BvhNode| {
-            let e = n.max - n.min;
-            e.x * e.y + e.y * e.z + e.z * e.x
-        };
-        // (binary node whose children go into wide node `wi`); a leaf root gets a
-        // wide root with that one leaf.
-        w.nodes.push(empty);
-        let mut work: Vec<(SmallVec<[u32; 4]>, usize)> = Vec::new();
-        if bin[0].count > 0 {
-            work.push((SmallVec::from_slice(&[0]), 0));
-        } else {
-            work.push((SmallVec::from_slice(&[bin[0].first, bin[0].first + 1]), 0));
-        }
-        while let Some((mut kids, wi)) = work.pop() {
-            // Open the largest inner child until there are four.
-            while kids.len() < 4 {
-                let best = kids
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, &k)| bin[k as usize].count == 0)
-                    .max_by(|a, b| half_area(&bin[*a.1 as usize]).total_cmp(&half_area(&bin[*b.1 as usize])))
-                    .map(|(i, _)| i);
-                let Some(i) = best else { break };
-                let f = bin[kids[i] as usize].first;
-                kids[i] = f;
-                kids.push(f + 1);
-            }
-            // Deeper subtrees are laid out after this node, depth first (popped in
-            // reverse so child 0's subtree comes first).
-            let mut pending = SmallVec::<[(SmallVec<[u32; 4]>, usize); 4]>::new();
-            for (s, &k) in kids.iter().enumerate() {
-                let n = &bin[k as usize];
-                let bx = [n.min.x, n.max.x, n.min.y, n.max.y, n.min.z, n.max.z];
-                for (a, v) in bx.iter().enumerate() {
-                    w.nodes[wi].b[a][s] = *v;
-                }
-                if n.count > 0 {
-                    w.nodes[wi].child[s] = LEAF | w.blocks.len() as u32;
-                    let mut blk = TriBlock { v: [[f32::NAN; 4]; 9], first: n.first, count: n.count };
-                    assert!(n.count <= 4, "mesh BVH leaf with {} triangles", n.count);
-                    for l in 0..n.count as usize {
-                        let t = &tris[n.first as usize + l];
-                        for c in 0..3 {
-                            for a in 0..3 {
-                                blk.v[c * 3 + a][l] = t[c][a];
-                            }
-                        }
+        let blocks = &mut w.blocks;
+        w.nodes = collapse(bin, |n| {
+            let mut blk = TriBlock { v: [[f32::NAN; 4]; 9], first: n.first, count: n.count };
+            assert!(n.count <= 4, "mesh BVH leaf with {} triangles", n.count);
+            for l in 0..n.count as usize {
+                let t = &tris[n.first as usize + l];
+                for c in 0..3 {
+                    for a in 0..3 {
+                        blk.v[c * 3 + a][l] = t[c][a];
                     }
-                    w.blocks.push(blk);
-                } else {
-                    let ni = w.nodes.len();
-                    w.nodes.push(empty);
-                    w.nodes[wi].child[s] = ni as u32;
-                    pending.push((SmallVec::from_slice(&[n.first, n.first + 1]), ni));
                 }
             }
-            while let Some(p) = pending.pop() {
-                work.push(p);
-            }
-        }
+            blocks.push(blk);
+            LEAF | (blocks.len() - 1) as u32
+        });
         w
     }
 
@@ -152,6 +96,74 @@ impl Wide {
     pub(super) fn is_empty(&self) -> bool {
         self.nodes.is_empty()
     }
+}
+
+/// Collapses the binary BVH `bin` (non-empty; inner nodes have children
+/// `first` and `first + 1`) into 4-wide nodes, node 0 the root, deeper
+/// subtrees laid out after their parent depth first. `leaf(n)` turns a binary
+/// leaf into its child code (`LEAF | payload`).
+pub(crate) fn collapse(bin: &[BvhNode], mut leaf: impl FnMut(&BvhNode) -> u32) -> Vec<Node4> {
+    let empty = Node4 {
+        b: [
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+        ],
+        child: [0; 4],
+    };
+    let half_area = |n: &BvhNode| {
+        let e = n.max - n.min;
+        e.x * e.y + e.y * e.z + e.z * e.x
+    };
+    // (binary nodes whose boxes go into wide node `wi`); a leaf root gets a
+    // wide root with that one leaf.
+    let mut nodes = vec![empty];
+    let mut work: Vec<(SmallVec<[u32; 4]>, usize)> = Vec::new();
+    if bin[0].count > 0 {
+        work.push((SmallVec::from_slice(&[0]), 0));
+    } else {
+        work.push((SmallVec::from_slice(&[bin[0].first, bin[0].first + 1]), 0));
+    }
+    while let Some((mut kids, wi)) = work.pop() {
+        // Open the largest inner child until there are four.
+        while kids.len() < 4 {
+            let best = kids
+                .iter()
+                .enumerate()
+                .filter(|(_, &k)| bin[k as usize].count == 0)
+                .max_by(|a, b| half_area(&bin[*a.1 as usize]).total_cmp(&half_area(&bin[*b.1 as usize])))
+                .map(|(i, _)| i);
+            let Some(i) = best else { break };
+            let f = bin[kids[i] as usize].first;
+            kids[i] = f;
+            kids.push(f + 1);
+        }
+        // Deeper subtrees are laid out after this node, depth first (popped in
+        // reverse so child 0's subtree comes first).
+        let mut pending = SmallVec::<[(SmallVec<[u32; 4]>, usize); 4]>::new();
+        for (s, &k) in kids.iter().enumerate() {
+            let n = &bin[k as usize];
+            let bx = [n.min.x, n.max.x, n.min.y, n.max.y, n.min.z, n.max.z];
+            for (a, v) in bx.iter().enumerate() {
+                nodes[wi].b[a][s] = *v;
+            }
+            if n.count > 0 {
+                nodes[wi].child[s] = leaf(n);
+            } else {
+                let ni = nodes.len();
+                nodes.push(empty);
+                nodes[wi].child[s] = ni as u32;
+                pending.push((SmallVec::from_slice(&[n.first, n.first + 1]), ni));
+            }
+        }
+        while let Some(p) = pending.pop() {
+            work.push(p);
+        }
+    }
+    nodes
 }
 
 /// Per-ray constants of the 4-wide slab test.
@@ -261,8 +273,13 @@ impl Wide {
 
 impl Node4 {
     #[inline(always)]
-    pub(super) fn child(&self, s: u32) -> u32 {
+    pub(crate) fn child(&self, s: u32) -> u32 {
         self.child[s as usize]
+    }
+
+    /// Child slot `s`'s box as (min, max) (min > max for an empty slot).
+    pub(crate) fn slot(&self, s: usize) -> (Vec3, Vec3) {
+        (Vec3::new(self.b[0][s], self.b[2][s], self.b[4][s]), Vec3::new(self.b[1][s], self.b[3][s], self.b[5][s]))
     }
 }
 
@@ -403,7 +420,7 @@ impl TriBlock {
 /// Eight lanes, aligned for one 256-bit load (or two 128-bit ones).
 #[derive(Clone, Copy)]
 #[repr(C, align(32))]
-pub(super) struct F8(pub(super) [f32; 8]);
+pub(crate) struct F8(pub(crate) [f32; 8]);
 
 impl F8 {
     #[inline(always)]
@@ -422,7 +439,7 @@ impl F8 {
 
     /// Bit k set where lane k of `self` >= lane k of `other` (false on NaN).
     #[inline(always)]
-    pub(super) fn ge_mask(&self, other: &F8) -> u32 {
+    pub(crate) fn ge_mask(&self, other: &F8) -> u32 {
         self.half(0).cmpge(other.half(0)).bitmask() | self.half(1).cmpge(other.half(1)).bitmask() << 4
     }
 }
@@ -431,7 +448,7 @@ impl F8 {
 /// box is tested against all eight rays at once (two 4-lane halves, or one
 /// 8-lane AVX op per step with [`hit_avx`](Self::hit_avx); the arithmetic of a
 /// lane is the same in both).
-pub(super) struct Packet8 {
+pub(crate) struct Packet8 {
     o: [F8; 3],
     inv: [F8; 3],
     near: [usize; 3],
@@ -441,7 +458,7 @@ impl Packet8 {
     /// `None` when the rays do not share an octant or some direction component is
     /// zero (the caller traces them one by one).
     #[inline(always)]
-    pub(super) fn new(o: &[Vec3; 8], d: &[Vec3; 8]) -> Option<Packet8> {
+    pub(crate) fn new(o: &[Vec3; 8], d: &[Vec3; 8]) -> Option<Packet8> {
         let mut near = [0usize; 3];
         for a in 0..3 {
             let mut neg = 0;
@@ -465,7 +482,7 @@ impl Packet8 {
     /// Per child: the rays (bit k = ray k) whose `[tlo, thi]` meets its box, and
     /// the smallest entry parameter among them.
     #[inline(always)]
-    pub(super) fn hit(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
+    pub(crate) fn hit(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
         let eps = Vec4::splat(SLAB_EPS);
         std::array::from_fn(|s| {
             let mut mask = 0u32;
@@ -487,13 +504,38 @@ impl Packet8 {
         })
     }
 
+    /// Per lane, what [`Aabb::ray_range`](crate::Aabb::ray_range) gives that
+    /// lane's ray on `[tlo, thi]` for box `b` (the same operations on the
+    /// same values: the near plane per axis is the one `min` picks there):
+    /// bit k set where lane k meets the box, and the entries.
+    #[inline(always)]
+    pub(crate) fn box_range(&self, b: &crate::Aabb, tlo: &F8, thi: &F8) -> (u32, F8) {
+        let (bmin, bmax) = (b.min.to_array(), b.max.to_array());
+        let mut mask = 0u32;
+        let mut entry = F8([0.0; 8]);
+        for h in 0..2 {
+            let mut lo = [Vec4::ZERO; 3];
+            let mut hi = [Vec4::ZERO; 3];
+            for a in 0..3 {
+                let (near, far) = if self.near[a] == 0 { (bmin[a], bmax[a]) } else { (bmax[a], bmin[a]) };
+                lo[a] = (Vec4::splat(near) - self.o[a].half(h)) * self.inv[a].half(h);
+                hi[a] = (Vec4::splat(far) - self.o[a].half(h)) * self.inv[a].half(h);
+            }
+            let t0 = lo[0].max(lo[1]).max(lo[2]).max(tlo.half(h));
+            let t1 = hi[0].min(hi[1]).min(hi[2]).min(thi.half(h));
+            mask |= t0.cmple(t1).bitmask() << (4 * h);
+            entry.0[4 * h..4 * h + 4].copy_from_slice(&t0.to_array());
+        }
+        (mask, entry)
+    }
+
     /// [`hit`](Self::hit) with 8-lane AVX ops: the same operations in the same
     /// order per lane (max/min keep their operand order, so NaN lanes behave
     /// alike), hence the same masks and entry parameters.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     #[inline]
-    pub(super) fn hit_avx(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
+    pub(crate) fn hit_avx(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
         use std::arch::x86_64::*;
         let eps = _mm256_set1_ps(SLAB_EPS);
         let sign = _mm256_set1_ps(-0.0);
@@ -541,7 +583,7 @@ impl Packet8 {
 /// the slot, so the order may differ from exact for `t`s a few ulps apart; it
 /// only steers the walk, the pruning uses the exact `t`.
 #[inline(always)]
-pub(super) fn order4(t: [f32; 4], hit: u32) -> ([u32; 4], usize) {
+pub(crate) fn order4(t: [f32; 4], hit: u32) -> ([u32; 4], usize) {
     let mut k: [u32; 4] = std::array::from_fn(|s| {
         let b = t[s].to_bits();
         let ord = b ^ (((b as i32) >> 31) as u32 | 0x8000_0000);
