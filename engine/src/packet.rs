@@ -294,11 +294,11 @@ impl RenderScene {
         let packet = n == 8
             && !self.packet_meshes.is_empty()
             && o.is_finite()
-            && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax);
+            && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax)
+            && rays.iter().all(|r| Ray::dir_rescale(r.dir).is_none());
         if !packet {
             for k in 0..n {
-                out[k] =
-                    if rays[k].is_valid() { self.intersect_ctx(&self.ray_ctx(&rays[k]), &mut ps.scratch, normals, tile) } else { None };
+                out[k] = self.intersect_ray(&rays[k], &mut ps.scratch, normals, tile);
             }
             return;
         }
