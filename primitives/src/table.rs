@@ -595,6 +595,9 @@ impl LeafTable {
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
         let ld = m.transform_vector3(d);
+        // The range check costs scenes/logo 1.5% of its instructions
+        // (callgrind, 480x270 flat: 209.7e6 -> 212.8e6, with the queries'
+        // check); its wall time moved within noise.
         if let Some(k) = Ray::dir_rescale(ld) {
             return self.spans_rescaled(i, (lo, ld), (tmin, tmax), k, out);
         }
