@@ -16,13 +16,13 @@ pub fn tmpdir(name: &str) -> std::path::PathBuf {
 
 const CAM: &str = r#""camera":{"eye":[0,0,5],"target":[0,0,0],"up":[0,1,0],"fov_y_deg":40}"#;
 
-fn scene_with(shape: &str) -> String {
+pub fn scene_with(shape: &str) -> String {
     format!(
         r#"{{{CAM},"image":{{"width":32,"height":24}},"objects":[{{"name":"a","shape":{{"union":[{{"sphere":{{"center":[0,0,0],"radius":1}}}},{shape}]}}}}]}}"#
     )
 }
 
-fn expect_error(json: &str, must_contain: &[&str]) {
+pub fn expect_error(json: &str, must_contain: &[&str]) {
     let dir = tmpdir("bad");
     // A mesh that encloses no volume (one flat triangle), next to the scene.
     std::fs::write(dir.join("flat.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();

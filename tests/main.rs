@@ -17,6 +17,7 @@ mod measure;
 mod oracle;
 mod povray;
 mod render_flat;
+mod scale_range;
 mod split;
 mod stress;
 mod tiles;

@@ -18,13 +18,13 @@ fn r32(x: f64) -> f64 {
     x as f32 as f64
 }
 
-fn rv(v: DVec3) -> DVec3 {
+pub fn rv(v: DVec3) -> DVec3 {
     v.as_vec3().as_dvec3()
 }
 
 /// The solids of one stress case, centred at `c` with size `s`, every number
 /// rounded to f32 as the scene file will be read.
-fn solids(c: DVec3, s: f64) -> Vec<(&'static str, Shape)> {
+pub fn solids(c: DVec3, s: f64) -> Vec<(&'static str, Shape)> {
     let c = rv(c);
     let p = |x: f64, y: f64, z: f64| rv(c + DVec3::new(x, y, z) * s);
     let sphere = Shape::Sphere { c, r: r32(0.8 * s) };
@@ -109,21 +109,21 @@ fn robust(mut x: Vec<f64>, min: f64) -> Vec<f64> {
 
 /// One stress case's figures.
 #[derive(Default)]
-struct Stats {
-    rays: usize,
+pub struct Stats {
+    pub rays: usize,
     /// Largest span end error / view over all rays with the model's span count.
-    max_err: f64,
+    pub max_err: f64,
     /// The same over span ends of chords at least 2e-3 of the view long. A
     /// chord's end moves as 1 / its length under the f32 rounding of the ray
     /// and of the leaf's map: the sphere's map alone (1/r in f32, 6e-8
     /// relative) moves the ends of a chord of length L by about 6e-8 r^2 /
     /// (L / 2), 5e-6 of the view at L = 1e-3 of the view here (measured:
     /// 1.03e-5 at offset 1e3 with chords from 1e-3 of the view).
-    max_err_long: f64,
+    pub max_err_long: f64,
     /// Rays with a wrong span count, chords < 1e-4 of the view set aside.
-    topo: usize,
+    pub topo: usize,
     /// The same, chords < 4e-4 of the view set aside.
-    topo4: usize,
+    pub topo4: usize,
 }
 
 /// Is the span count wrong, chords and gaps shorter than `min` set aside?
@@ -135,10 +135,30 @@ fn wrong_count(got: &[f64], want: &[f64], min: f64) -> bool {
     g.len() != w.len() && (g.len() > robust(want.to_vec(), 0.5 * min).len() || w.len() > robust(got.to_vec(), 0.5 * min).len())
 }
 
-fn measure(shape: &Shape, c: DVec3, s: f64, seed: u64) -> Stats {
+/// Where one stress case looks from: its solids' centre `c` and size `s`, the
+/// rays' origins `view` back from their targets, their directions' lengths
+/// 10^x for x uniform in `dir_exp`; chords and gaps shorter than `chord` (a
+/// length) are set aside when span counts are compared.
+#[derive(Clone, Copy)]
+pub struct Case {
+    pub c: DVec3,
+    pub s: f64,
+    pub view: f64,
+    pub dir_exp: (f64, f64),
+    pub chord: f64,
+}
+
+impl Case {
+    /// The stress table's case: viewed from 4 sizes, direction lengths 0.1 to 10.
+    pub fn near(c: DVec3, s: f64) -> Case {
+        Case { c, s, view: 4.0 * s, dir_exp: (-1.0, 1.0), chord: 1e-4 * (4.0 * s) }
+    }
+}
+
+pub fn measure(shape: &Shape, case: &Case, seed: u64) -> Stats {
+    let Case { c, s, view, dir_exp, chord } = *case;
     let scene = bake(std::slice::from_ref(shape));
     let mut rng = SmallRng::seed_from_u64(seed);
-    let view = 4.0 * s;
     let f = |p: DVec3| shape.inside(p);
     let mut st = Stats::default();
     for k in 0..160 {
@@ -158,7 +178,7 @@ fn measure(shape: &Shape, c: DVec3, s: f64, seed: u64) -> Stats {
         } else {
             (c + rp(&mut rng, 0.8 * s), dir)
         };
-        let scale = 10f64.powf(rng.gen_range(-1.0..1.0));
+        let scale = 10f64.powf(rng.gen_range(dir_exp.0..dir_exp.1));
         let (o32, d32) = ((tgt - dir * view).as_vec3(), (dir * scale).as_vec3());
         let (o, d) = (o32.as_dvec3(), d32.as_dvec3());
         let ray = rothray::engine::Ray::new(o32, d32);
@@ -170,7 +190,7 @@ fn measure(shape: &Shape, c: DVec3, s: f64, seed: u64) -> Stats {
         let half = 1.5 * s / dl;
         let mids: Vec<f64> = spans.iter().map(|s| 0.5 * (s.t0 as f64 + s.t1 as f64)).collect();
         let want = model_crossings(&f, o, d, ((tc - half).max(0.0), tc + half), 4000, &mids);
-        let min = 1e-4 * view / dl;
+        let min = chord / dl;
         st.rays += 1;
         if wrong_count(&got, &want, min) {
             st.topo += 1;
@@ -207,7 +227,7 @@ fn table() -> Vec<(String, String, Stats)> {
     println!("|---|---|---|---|---|");
     for (ci, (label, c, s)) in cases.iter().enumerate() {
         for (ki, (name, shape)) in solids(*c, *s).into_iter().enumerate() {
-            let st = measure(&shape, rv(*c), *s, seed + (ci * 100 + ki) as u64);
+            let st = measure(&shape, &Case::near(rv(*c), *s), seed + (ci * 100 + ki) as u64);
             println!("| {name} | {label} | {:.1e} | {:.1e} | {} / {} of {} |", st.max_err, st.max_err_long, st.topo, st.topo4, st.rays);
             rows.push((name.to_string(), label.clone(), st));
         }

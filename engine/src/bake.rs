@@ -35,6 +35,16 @@ pub enum BakeError {
         /// Its name, if any.
         name: Option<String>,
     },
+    /// A leaf's size or place is outside the supported range
+    /// ([`rothray_primitives::table::MIN_SIZE`], [`rothray_primitives::table::MAX_COORD`]).
+    OutOfRange {
+        /// The leaf entity.
+        entity: Entity,
+        /// Its name, if any.
+        name: Option<String>,
+        /// What is out of range, and the range.
+        message: String,
+    },
     /// A CSG child has neither a shape nor a `CsgNode`, or no longer exists.
     NotASolid {
         /// The entity.
@@ -56,7 +66,16 @@ impl std::fmt::Display for BakeError {
                 write!(f, "{}: {}: {}", name.clone().unwrap_or(format!("{entity:?}")), error.field, error.message)
             }
             BakeError::SingularTransform { entity, name } => {
-                write!(f, "{}: transform is singular or not finite", name.clone().unwrap_or(format!("{entity:?}")))
+                write!(
+                    f,
+                    "{}: transform is singular or not finite (leaf sizes after transforms from {:e} to {:e} are supported)",
+                    name.clone().unwrap_or(format!("{entity:?}")),
+                    rothray_primitives::table::MIN_SIZE,
+                    rothray_primitives::table::MAX_COORD
+                )
+            }
+            BakeError::OutOfRange { entity, name, message } => {
+                write!(f, "{}: leaf out of range: {message}", name.clone().unwrap_or(format!("{entity:?}")))
             }
             BakeError::NotASolid { entity } => write!(f, "{entity:?} is a CSG child without a shape"),
             BakeError::BadNode { entity, message } => write!(f, "{entity:?}: {message}"),
@@ -382,6 +401,7 @@ fn bake_object(view: &hecs::ViewBorrow<BakeQuery>, root: Entity, oi: u32, sink: 
                     let idx = pushed.map_err(|err| match err {
                         LeafError::Shape(error) => BakeError::BadShape { entity: e, name: name_of(), error },
                         LeafError::SingularTransform => BakeError::SingularTransform { entity: e, name: name_of() },
+                        LeafError::OutOfRange(message) => BakeError::OutOfRange { entity: e, name: name_of(), message },
                     })?;
                     // No default text per leaf (`RenderScene::leaf_name` makes
                     // it): 32 bytes per leaf on a union of 10^6 spheres.

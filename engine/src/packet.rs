@@ -294,16 +294,17 @@ impl RenderScene {
         let meshes = n == 8
             && !self.packet_meshes.is_empty()
             && o.is_finite()
-            && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax);
+            && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax)
+            && rays.iter().all(|r| Ray::dir_rescale(r.dir).is_none());
         let unions = tile.map_or(&[][..], |t| t.unions);
         if !meshes {
-            if n == 8 && !unions.is_empty() && rays.iter().all(Ray::is_valid) {
+            let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
+            if n == 8 && !unions.is_empty() && rays.iter().all(plain) {
                 self.union_packet(rays, ps, out, normals, tile);
                 return;
             }
             for k in 0..n {
-                out[k] =
-                    if rays[k].is_valid() { self.intersect_ctx(&self.ray_ctx(&rays[k]), &mut ps.scratch, normals, tile) } else { None };
+                out[k] = self.intersect_ray(&rays[k], &mut ps.scratch, normals, tile);
             }
             return;
         }

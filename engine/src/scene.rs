@@ -8,7 +8,11 @@ use std::cell::RefCell;
 use glam::Vec3;
 use hecs::Entity;
 use rothray_csg::{first_surface, Mode, Program, RayCtx, Scratch};
-use rothray_primitives::{bvh::FlatBvh, Aabb, LeafTable, Span, Surf};
+use rothray_primitives::{
+    bvh::FlatBvh,
+    ray::{scale_t, ScaledSink},
+    Aabb, LeafTable, Span, SpanSink, Surf,
+};
 
 use crate::box_list::entry;
 use crate::knobs::Knobs;
@@ -226,10 +230,23 @@ impl RenderScene {
 
     /// Nearest hit with caller-provided scratch (no thread-local access).
     pub fn intersect_with(&self, ray: &Ray, scratch: &mut Scratch) -> Option<Hit> {
+        self.intersect_ray(ray, scratch, true, None)
+    }
+
+    /// The nearest hit of any valid ray: one whose direction is out of the
+    /// range the queries take as given ([`Ray::dir_rescale`]: a direction of
+    /// 1e-24 gave no hit, its |d|^2 being 0 in f32) is traced scaled by a
+    /// power of two, its t scaled back (`None` when that t is past f32).
+    pub(crate) fn intersect_ray(&self, ray: &Ray, scratch: &mut Scratch, normals: bool, tile: Option<&TileView>) -> Option<Hit> {
         if !ray.is_valid() {
             return None;
         }
-        self.intersect_ctx(&self.ray_ctx(ray), scratch, true, None)
+        if let Some(k) = Ray::dir_rescale(ray.dir) {
+            let h = self.intersect_ctx(&self.ray_ctx(&ray.rescaled(k)), scratch, normals, tile)?;
+            let t = scale_t(h.t, k);
+            return t.is_finite().then_some(Hit { t, ..h });
+        }
+        self.intersect_ctx(&self.ray_ctx(ray), scratch, normals, tile)
     }
 
     /// The nearest hit of the ray of `ctx` (objects as `tile` sees them).
@@ -298,6 +315,10 @@ impl RenderScene {
         if !ray.is_valid() {
             return false;
         }
+        if let Some(k) = Ray::dir_rescale(ray.dir) {
+            // As in `intersect_ray`: the same line with a direction in range.
+            return self.occluded_in(&ray.rescaled(k), scratch, tile);
+        }
         let ctx = self.ray_ctx(ray);
         for &oi in &self.unbounded {
             let Some(obj) = self.obj_ref(oi, tile) else { continue };
@@ -345,9 +366,16 @@ impl RenderScene {
             if !ray.is_valid() || oi as usize >= self.objects.len() {
                 return Vec::new();
             }
-            let ctx = self.ray_ctx(ray);
+            // As in `intersect_ray`: a direction out of range is traced scaled.
+            let k = Ray::dir_rescale(ray.dir);
+            let ctx = self.ray_ctx(&k.map_or(*ray, |k| ray.rescaled(k)));
             self.program.eval(&self.leaves, self.objects[oi as usize].root, &ctx, Mode::All, s);
-            s.out.as_slice().to_vec()
+            let Some(k) = k else { return s.out.as_slice().to_vec() };
+            let mut out = Vec::new();
+            for sp in s.out.as_slice() {
+                ScaledSink { out: &mut out, k }.push_span(*sp);
+            }
+            out
         })
     }
 

@@ -38,6 +38,13 @@ pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
         return None;
     }
     let c = o.length_squared() - 1.0;
+    if c == f32::INFINITY {
+        // |o| > 1.8e19 radii: the chord (at most 2 radii) is below f32's
+        // resolution of t (about 6e-8 of |o| radii), so the span has no
+        // length; c / q would make it [t, inf] (a ray from 1e20 to the unit
+        // sphere was inside it forever).
+        return None;
+    }
     let q = -(b + disc.sqrt().copysign(b));
     let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
     let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
@@ -119,6 +126,10 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
             return None;
         }
         let c = o.x * o.x + o.y * o.y - 1.0;
+        if c == f32::INFINITY {
+            // As in `sphere`: a chord below f32's resolution, not [t, inf].
+            return None;
+        }
         let q = -(b + disc.sqrt().copysign(b));
         let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
         if t0 <= t1 {

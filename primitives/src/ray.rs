@@ -4,6 +4,17 @@
 
 use glam::Vec3;
 
+use crate::{Span, SpanSink};
+
+/// The largest direction component that queries and kernels take as given
+/// (2^32; the smallest is its inverse). Inside this range the kernels' f32
+/// squares of a direction (|d|^2 of the sphere and cylinder, the length in
+/// the fusing tolerance) stay normal and finite with room to spare; outside
+/// it (|d| = 1e-24 squared underflows to 0, 1e20 squared overflows) the
+/// line is traced with its direction scaled by a power of two
+/// ([`Ray::dir_rescale`]), which is exact, and t scaled back.
+pub const DIR_SAFE_MAX: f32 = 4294967296.0;
+
 /// A ray `origin + t * dir` over `t` in `[tmin, tmax]` (t is in units of
 /// `dir`, which need not be unit length), with `1 / dir` made once for the
 /// box tests of every BVH it walks.
@@ -50,6 +61,28 @@ impl Ray {
         self.origin + self.dir * t
     }
 
+    /// The power of two `k` that brings `dir`'s largest component into
+    /// [1, 2) when that component lies outside [1 / [`DIR_SAFE_MAX`],
+    /// [`DIR_SAFE_MAX`]] (`None` inside: the common case costs one pair of
+    /// comparisons). In f64, since the factor for a subnormal direction
+    /// (up to 2^149) does not fit in f32.
+    #[inline(always)]
+    pub fn dir_rescale(dir: Vec3) -> Option<f64> {
+        let m = dir.abs().max_element();
+        if (1.0 / DIR_SAFE_MAX..=DIR_SAFE_MAX).contains(&m) {
+            return None;
+        }
+        dir_scale_slow(m)
+    }
+
+    /// The same line with its direction multiplied by `k` (a power of two from
+    /// [`Ray::dir_rescale`]) and its range divided by it: t on it times `k` is
+    /// t on `self` ([`scale_t`]). Exact, unless the range's ends leave f32.
+    pub fn rescaled(&self, k: f64) -> Ray {
+        let dir = (self.dir.as_dvec3() * k).as_vec3();
+        Ray::segment(self.origin, dir, scale_t(self.tmin, 1.0 / k), scale_t(self.tmax, 1.0 / k))
+    }
+
     /// Is the ray usable (finite origin, finite non-zero direction, tmin <= tmax)?
     pub fn is_valid(&self) -> bool {
         self.origin.is_finite()
@@ -58,5 +91,41 @@ impl Ray {
             && !self.tmin.is_nan()
             && !self.tmax.is_nan()
             && self.tmin <= self.tmax
+    }
+}
+
+#[cold]
+#[inline(never)]
+fn dir_scale_slow(m: f32) -> Option<f64> {
+    if !(m > 0.0 && m.is_finite()) {
+        return None;
+    }
+    // 2^-e for m = 1.x * 2^e (m as f64 is normal even when m is subnormal).
+    let e = ((m as f64).to_bits() >> 52) as i64 - 1023;
+    Some(f64::from_bits(((1023 - e) as u64) << 52))
+}
+
+/// `t * k` rounded to f32 (`k` a power of two: exact unless it leaves f32's range).
+#[inline]
+pub fn scale_t(t: f32, k: f64) -> f32 {
+    (t as f64 * k) as f32
+}
+
+/// A sink that takes spans in t of a rescaled ray ([`Ray::rescaled`] with `k`)
+/// and passes them on in t of the original ray; a span whose ends meet once
+/// scaled (f32's range exceeded) is dropped, as zero-length spans are.
+pub struct ScaledSink<'a, S: SpanSink + ?Sized> {
+    /// Where the spans go.
+    pub out: &'a mut S,
+    /// The factor of [`Ray::rescaled`].
+    pub k: f64,
+}
+
+impl<S: SpanSink + ?Sized> SpanSink for ScaledSink<'_, S> {
+    fn push_span(&mut self, s: Span) {
+        let (t0, t1) = (scale_t(s.t0, self.k), scale_t(s.t1, self.k));
+        if t1 > t0 {
+            self.out.push_span(Span { t0, t1, ..s });
+        }
     }
 }
