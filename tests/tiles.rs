@@ -295,13 +295,14 @@ fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
 /// Packets of a tile walk its wide unions of leaves together, and every
 /// ray still gets exactly (bit for bit) what it gets alone: camera packets
 /// (one origin) and packets of parallel rays from a box of origins (a
-/// tile's shadow rays), in scenes with other objects in front and behind,
+/// tile's shadow rays; both nearest and any hit), in scenes with other
+/// objects in front and behind,
 /// a ground plane, and meshes in some (which take the mesh packet path
 /// too). The packet walks must answer most lanes for the test to mean
 /// anything.
 #[test]
 fn packets_walk_wide_unions_together() {
-    let (mut rays, mut hits) = (0u64, 0u64);
+    let (mut rays, mut hits, mut shadows) = (0u64, 0u64, 0u64);
     let _ = rothray::csg::take_eval_counts();
     for seed in 0..100u64 {
         let seed = 0x3a11 + seed;
@@ -351,9 +352,15 @@ fn packets_walk_wide_unions_together() {
                     (rays, region)
                 };
                 let mut out = [None; 8];
+                let mut blocked = [false; 8];
                 if scene.prepare_tile(&region, &mut ts) {
                     let view = ts.view();
                     scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
+                    scene.occluded_packet(&packet, &mut ps, &mut blocked, Some(&view));
+                }
+                for k in 0..8 {
+                    assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
+                    shadows += blocked[k] as u64;
                 }
                 for k in 0..8 {
                     let one = scene.intersect(&packet[k]);
@@ -372,8 +379,8 @@ fn packets_walk_wide_unions_together() {
     }
     let c = rothray::csg::take_eval_counts();
     println!(
-        "{rays} rays, {hits} hits; wide-union evaluations answered by packet walks {}, not answered {}",
+        "{rays} rays, {hits} hits, {shadows} blocked (any-hit); wide-union evaluations answered by packet walks {}, not answered {}",
         c.packet_lanes, c.packet_misses
     );
-    assert!(hits > rays / 5 && c.packet_lanes > rays / 3, "too few hits or packet-walked lanes to test");
+    assert!(hits > rays / 5 && shadows > rays / 5 && c.packet_lanes > rays / 3, "too few hits or packet-walked lanes to test");
 }

@@ -422,6 +422,33 @@ impl RenderScene {
         }
     }
 
+    /// Any-hit for up to eight rays inside the region `tile` was prepared
+    /// for (`out[k]` for `rays[k]`), the same as [`RenderScene::occluded_in`]
+    /// ray by ray: eight rays in range (a tile's shadow rays towards one
+    /// light) walk the tile's wide unions of leaves together first.
+    pub fn occluded_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [bool], tile: Option<&TileView>) {
+        let n = rays.len().min(out.len());
+        let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
+        match tile {
+            Some(t) if n == 8 && !t.unions.is_empty() && rays.iter().all(plain) => {
+                let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
+                ps.memo.clear();
+                for &r in t.unions {
+                    t.prog.record_union8(&self.leaves, r, &ctx, 0xff, &mut ps.memo, &mut ps.scratch);
+                }
+                let memo = &ps.memo;
+                for k in 0..8 {
+                    out[k] = self.occluded_ctx(&RayCtx { memo: Some((memo, k)), ..ctx[k] }, &mut ps.scratch, tile);
+                }
+            }
+            _ => {
+                for k in 0..n {
+                    out[k] = self.occluded_in(&rays[k], &mut ps.scratch, tile);
+                }
+            }
+        }
+    }
+
     /// Does every object lie inside a packet mesh (so that packet rays missing
     /// those meshes skip their evaluation)? For tests.
     #[doc(hidden)]

@@ -228,16 +228,35 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
         }
         let any = scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts);
         let view = wk.shadow_ts.view();
-        for k in 0..n {
-            let c = wk.facing[k].dot(to_l);
-            if wk.hits[k].is_none() || c <= 0.0 {
-                continue;
+        // The shadow rays in packets of eight (parallel rays from the tile's
+        // hits: the tile's wide unions are walked once per packet).
+        let mut lanes = [0usize; 8];
+        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
+        let mut m = 0;
+        for k in 0..=n {
+            if k < n {
+                let c = wk.facing[k].dot(to_l);
+                if wk.hits[k].is_none() || c <= 0.0 {
+                    continue;
+                }
+                wk.shadows += 1;
+                (lanes[m], rays[m]) = (k, Ray::new(wk.origin[k], to_l));
+                m += 1;
+                if m < 8 {
+                    continue;
+                }
             }
-            wk.shadows += 1;
-            let sr = Ray::new(wk.origin[k], to_l);
-            if !any || !scene.occluded_in(&sr, &mut wk.ps.scratch, Some(&view)) {
-                wk.light[k] += l.color * c;
+            let mut blocked = [false; 8];
+            if any && m > 0 {
+                scene.occluded_packet(&rays[..m], &mut wk.ps, &mut blocked, Some(&view));
             }
+            for j in 0..m {
+                if !blocked[j] {
+                    let kk = lanes[j];
+                    wk.light[kk] += l.color * wk.facing[kk].dot(to_l);
+                }
+            }
+            m = 0;
         }
     }
     for k in 0..n {

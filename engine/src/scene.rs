@@ -319,16 +319,22 @@ impl RenderScene {
             // As in `intersect_ray`: the same line with a direction in range.
             return self.occluded_in(&ray.rescaled(k), scratch, tile);
         }
-        let ctx = self.ray_ctx(ray);
+        self.occluded_ctx(&self.ray_ctx(ray), scratch, tile)
+    }
+
+    /// [`RenderScene::occluded_in`] for a ray in range (no rescale), with
+    /// its context (which may carry a packet's memo).
+    pub(crate) fn occluded_ctx(&self, ctx: &RayCtx, scratch: &mut Scratch, tile: Option<&TileView>) -> bool {
+        let ray = &ctx.ray;
         for &oi in &self.unbounded {
             let Some(obj) = self.obj_ref(oi, tile) else { continue };
-            if self.object_first(obj, &ctx, scratch).is_some() {
+            if self.object_first(obj, ctx, scratch).is_some() {
                 return true;
             }
         }
         let mut cands = std::mem::take(&mut scratch.cands);
         self.object_candidates(ray, tile, &mut cands);
-        let hit = cands.iter().any(|&(_, oi)| self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, &ctx, scratch).is_some()));
+        let hit = cands.iter().any(|&(_, oi)| self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, ctx, scratch).is_some()));
         scratch.cands = cands;
         hit
     }
