@@ -90,33 +90,73 @@ pub fn depressed_cubic_roots(p: f64, r: f64, out: &mut [f64; 3]) -> usize {
     3
 }
 
-/// Safeguarded Newton on `q` in the bracket `[a, b]` holding one sign change
-/// (`fa` the value at `a`), from `x`: the same stopping rule as
+/// Safeguarded Newton on `q` in a bracket `[a, b]` holding one sign change
+/// (`neg_at_a`: the sign just right of `a`), at `x`: Newton steps that leave
+/// the bracket become bisections. The same stopping rule as
 /// [`crate::poly::roots_in_tol`] (a step or the bracket below
 /// `max(eps, 1e-15 (1 + |x|))`), so the roots are as accurate as there.
-fn refine(c: &[f64; 3], mut a: f64, mut b: f64, fa: f64, mut x: f64, eps: f64) -> f64 {
-    let neg_at_a = fa < 0.0;
-    for _ in 0..100 {
-        let (f, df) = q_d(c, x);
+#[derive(Clone, Copy)]
+struct Bracket {
+    a: f64,
+    b: f64,
+    neg_at_a: bool,
+    x: f64,
+}
+
+impl Bracket {
+    /// One step from `q(x)`, `q'(x)`: the root when done.
+    #[inline(always)]
+    fn step(&mut self, f: f64, df: f64, eps: f64) -> Option<f64> {
+        let x = self.x;
         if f == 0.0 {
-            return x;
+            return Some(x);
         }
-        if (f < 0.0) == neg_at_a {
-            a = x
+        if (f < 0.0) == self.neg_at_a {
+            self.a = x
         } else {
-            b = x
+            self.b = x
         }
+        let (a, b) = (self.a, self.b);
         let mut nx = x - f / df;
         if !(nx > a && nx < b) {
             nx = 0.5 * (a + b);
         }
         let tol = eps.max(1e-15 * (1.0 + x.abs()));
         if (nx - x).abs() <= tol || b - a <= tol {
-            return nx;
+            return Some(nx);
         }
-        x = nx;
+        self.x = nx;
+        None
     }
-    x
+}
+
+/// [`Bracket::step`] to the end (at most 100 steps).
+fn refine(c: &[f64; 3], mut br: Bracket, eps: f64) -> f64 {
+    for _ in 0..100 {
+        let (f, df) = q_d(c, br.x);
+        if let Some(r) = br.step(f, df, eps) {
+            return r;
+        }
+    }
+    br.x
+}
+
+/// Two [`refine`]s at once, their steps interleaved while both run: each step
+/// is a chain of dependent multiplies and a division, so two independent
+/// chains cost about as much as one (the common ray meets the tube twice, a
+/// root on each side of the one minimum). Each root is exactly what `refine`
+/// gives.
+fn refine_pair(c: &[f64; 3], mut b0: Bracket, mut b1: Bracket, eps: f64) -> (f64, f64) {
+    for _ in 0..100 {
+        let ((f0, d0), (f1, d1)) = (q_d(c, b0.x), q_d(c, b1.x));
+        match (b0.step(f0, d0, eps), b1.step(f1, d1, eps)) {
+            (Some(r0), Some(r1)) => return (r0, r1),
+            (Some(r0), None) => return (r0, refine(c, b1, eps)),
+            (None, Some(r1)) => return (refine(c, b0, eps), r1),
+            (None, None) => {}
+        }
+    }
+    (b0.x, b1.x)
 }
 
 /// The first Newton iterate in the monotone bracket `[a, b]`, whose ends are
@@ -146,6 +186,14 @@ fn seed(c: &[f64; 3], (a, fa, flat_a): (f64, f64, bool), (b, fb, flat_b): (f64, 
     }
 }
 
+/// A root as found while walking the monotone pieces: exact (q is 0 at an
+/// end or a critical point) or still to be polished in its bracket.
+#[derive(Clone, Copy)]
+enum Found {
+    Exact(f64),
+    Polish(Bracket),
+}
+
 /// Pushes the real roots of `s^4 + c[2] s^2 + c[1] s + c[0]` in `[-h, h]` into
 /// `out`, increasing; returns how many. As [`crate::poly::roots_in_tol`] with
 /// `eps`: a touching double root is reported once if its value is exactly 0,
@@ -156,12 +204,14 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
     }
     let mut crit = [0.0f64; 3];
     let nc = depressed_cubic_roots(0.5 * c[2], 0.25 * c[1], &mut crit);
-    let mut count = 0;
+    // First every bracket (cheap), then the polishing, two at a time.
+    let mut found = [Found::Exact(0.0); 4];
+    let mut nf = 0;
     let mut a = -h;
     let mut fa = q(c, a);
     if fa == 0.0 {
-        out[0] = a;
-        count = 1;
+        found[0] = Found::Exact(a);
+        nf = 1;
     }
     for i in 0..=nc {
         let b = if i < nc { crit[i] } else { h };
@@ -170,21 +220,42 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
         }
         let fb = q(c, b);
         if fb == 0.0 {
-            if count == 0 || out[count - 1] != b {
-                out[count] = b;
-                count += 1;
-            }
+            found[nf] = Found::Exact(b);
+            nf += 1;
         } else if fa != 0.0 && (fa < 0.0) != (fb < 0.0) {
-            let r = refine(c, a, b, fa, seed(c, (a, fa, i > 0), (b, fb, i < nc)), eps);
-            if count == 0 || out[count - 1] != r {
-                out[count] = r;
-                count += 1;
-            }
+            let x = seed(c, (a, fa, i > 0), (b, fb, i < nc));
+            found[nf] = Found::Polish(Bracket { a, b, neg_at_a: fa < 0.0, x });
+            nf += 1;
         }
         a = b;
         fa = fb;
-        if count >= 4 {
+        if nf >= 4 {
             break;
+        }
+    }
+    let mut roots = [0.0f64; 4];
+    let mut pending: Option<usize> = None;
+    for k in 0..nf {
+        match found[k] {
+            Found::Exact(x) => roots[k] = x,
+            Found::Polish(br) => match pending.take() {
+                None => pending = Some(k),
+                Some(j) => {
+                    let Found::Polish(first) = found[j] else { unreachable!() };
+                    (roots[j], roots[k]) = refine_pair(c, first, br, eps);
+                }
+            },
+        }
+    }
+    if let Some(j) = pending {
+        let Found::Polish(br) = found[j] else { unreachable!() };
+        roots[j] = refine(c, br, eps);
+    }
+    let mut count = 0;
+    for &r in &roots[..nf] {
+        if count == 0 || out[count - 1] != r {
+            out[count] = r;
+            count += 1;
         }
     }
     count
