@@ -13,7 +13,7 @@
 //!
 //! The table is struct-of-arrays; the hot path does one `match` on the fieldless
 //! [`LeafKind`]. Kernels live in [`kernels`] (f32, except the torus quartic, which
-//! is solved in f64 by [`poly`]). [`bvh::FlatBvh`] is the BVH every level of the
+//! is solved in f64 by [`quartic`]; [`poly`] holds the general root finders). [`bvh::FlatBvh`] is the BVH every level of the
 //! engine uses (built with obvhs).
 #![warn(missing_docs)]
 
@@ -26,6 +26,7 @@ pub mod kernels;
 pub mod mesh;
 pub mod poly;
 pub mod polytope;
+pub mod quartic;
 pub mod ray;
 pub mod sweep;
 pub mod table;
