@@ -258,7 +258,7 @@ fn tiles_of_many_objects_keep_ties_between_objects() {
 
 /// A union of many small leaves (every kind, half-spaces, transforms with
 /// shear, exact copies and boxes sharing faces): what a tile's packets walk
-/// together ([`rothray::csg::Program::record_union8`]).
+/// together ([`rothray::csg::PacketMemo::walk_unions_for`]).
 fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
     let mut kids: Vec<Shape> = Vec::with_capacity(n + 4);
     for _ in 0..n {

@@ -24,7 +24,7 @@ pub struct EvalCounts {
     /// difference at an empty positive operand.
     pub early_outs: u64,
     /// Wide-union evaluations answered by their packet's walk
-    /// ([`crate::Program::record_union8`]).
+    /// ([`crate::PacketMemo::walk_unions_for`]).
     pub packet_lanes: u64,
     /// Wide-union evaluations of a packet lane that its packet's record did
     /// not answer (another range: the lane walked on its own).

@@ -55,7 +55,7 @@ pub struct Wide {
     /// query).
     pub cull: FlatBvh,
     /// `cull` collapsed to four children per node, for packets of eight
-    /// rays ([`Program::record_union8`]); empty in a tile's own wide nodes.
+    /// rays ([`PacketMemo::walk_unions_for`]); empty in a tile's own wide nodes.
     pub packet: BoxWide,
 }
 
@@ -161,9 +161,11 @@ pub enum Mode {
 pub struct PacketMemo {
     leaves: Vec<MemoLeaf>,
     len: usize,
+    /// Wide unions walked for the packet, on demand (see `union_packet.rs`).
+    unions: std::cell::RefCell<union_packet::UnionRecords>,
 }
 
-/// One leaf's (or, with [`UNION_KEY`], one wide union's) record.
+/// One leaf's (or one wide union's) record.
 #[derive(Debug, Default)]
 pub(crate) struct MemoLeaf {
     leaf: u32,
@@ -177,9 +179,11 @@ pub(crate) struct MemoLeaf {
 }
 
 impl PacketMemo {
-    /// Forgets every leaf (keeps the memory).
+    /// Forgets every leaf and union (keeps the memory); no union is walked
+    /// for the packet until [`PacketMemo::walk_unions_for`].
     pub fn clear(&mut self) {
         self.len = 0;
+        self.unions.get_mut().clear();
     }
 
     /// Records leaf `leaf` queried on `[tmin[k], tmax[k]]` per lane: `fill` pushes
@@ -219,31 +223,6 @@ impl PacketMemo {
         m & e.done
     }
 
-    /// Lane `k`'s result of wide leaf union `node` in nearest mode on `[lo, hi]`
-    /// (appended to `out`) and where it stops being exact, when the packet's
-    /// record answers that query exactly as the lane's own walk would: the
-    /// record starts at `lo`, covers `hi`, and either became exact-limited
-    /// before `hi` (its first confirmed entry; the walk on the shorter range
-    /// confirms the same one, the union's result not depending on the order
-    /// of its operands) or found nothing at all.
-    #[inline]
-    pub(crate) fn serve_union(&self, k: usize, node: u32, (lo, hi): (f32, f32), out: &mut SpanList) -> Option<f32> {
-        let e = self.entry(UNION_KEY | node)?;
-        if e.done & (1 << k) == 0 || lo != e.tmin[k] || hi > e.tmax[k] {
-            counts::packet_lane(false);
-            return None;
-        }
-        let (v, spans) = (e.valid[k], &e.spans[k]);
-        if v <= hi {
-            out.0.extend_from_slice(spans);
-        } else if !(spans.is_empty() && v == f32::INFINITY) {
-            counts::packet_lane(false);
-            return None;
-        }
-        counts::packet_lane(true);
-        Some(v)
-    }
-
     /// Every lane's record of `leaf` (one lookup for a packet's eight rays).
     #[inline]
     pub fn lanes(&self, leaf: u32) -> Option<MemoLanes<'_>> {
@@ -266,9 +245,6 @@ impl PacketMemo {
         Some(if v >= hi { f32::INFINITY } else { v })
     }
 }
-
-/// Memo key of a wide union node (leaf indices stay below it).
-pub(crate) const UNION_KEY: u32 = 1 << 31;
 
 /// The eight lanes' records of one leaf in a [`PacketMemo`].
 #[derive(Clone, Copy, Debug)]
@@ -376,10 +352,6 @@ pub struct Scratch {
     pub out: SpanList,
     /// Point-classification values (post-order).
     bools: Vec<bool>,
-    /// Per packet lane, its result of a wide union walked for the packet,
-    /// and its candidates there.
-    lanes: Vec<SpanList>,
-    lane_cands: Vec<Vec<(u32, f32)>>,
     /// A caller's candidate list, `(entry t, id)` (the engine's objects along
     /// a ray), kept here so that it too is reused from ray to ray.
     pub cands: Vec<(f32, u32)>,
@@ -779,12 +751,12 @@ impl Program {
     /// children: regularisation (short spans dropped, boundaries fused) is
     /// not associative, so a walk in another order could end a few eps
     /// differently. A packet that walked the union for this ray already
-    /// ([`Program::record_union8`]) answers from its memo where its record
+    /// ([`PacketMemo::walk_unions_for`]) answers from its memo where its record
     /// covers the query.
     fn leaf_union(&self, n: usize, ask: Ask, (tmin, tmax): (f32, f32), lists: Lists) -> f32 {
         let Lists { leaf, tmp, acc, cand } = lists;
         if let (Some((memo, k)), Mode::Nearest) = (ask.ctx.memo, ask.mode) {
-            if let Some(v) = memo.serve_union(k, n as u32, (tmin, tmax), acc) {
+            if let Some(v) = memo.union_lane(self, ask.leaves, n as u32, (k, (tmin, tmax)), acc) {
                 return v;
             }
         }

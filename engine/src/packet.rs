@@ -372,11 +372,10 @@ impl RenderScene {
                 return;
             }
         }
-        // The wide unions of the tile, walked for the packet's rays (their
-        // contexts without a memo: the walks fill it).
-        let plain: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: None });
-        for &r in unions {
-            tile.expect("unions come from a tile").prog.record_union8(&self.leaves, r, &plain, left, &mut ps.memo, &mut ps.scratch);
+        // The tile's wide unions, walked for the packet's rays on demand.
+        if !unions.is_empty() {
+            let plain: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: None });
+            ps.memo.walk_unions_for(&plain, left);
         }
         // All eight contexts are written before the first is read: reading one
         // just built (its fields written piecewise, read with wider loads) stalls
@@ -406,15 +405,12 @@ impl RenderScene {
 
     /// [`RenderScene::intersect_packet_with`] for eight valid rays of a tile
     /// that has objects packets walk together (wide unions of leaves) and no
-    /// packet meshes: the unions are walked for all eight rays, then each
-    /// ray is evaluated with those walks as memos.
+    /// packet meshes: each ray is evaluated with a memo that walks a union
+    /// for all eight rays when the first of them asks for it.
     fn union_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
-        let Some(t) = tile else { return };
         let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
         ps.memo.clear();
-        for &r in t.unions {
-            t.prog.record_union8(&self.leaves, r, &plain, 0xff, &mut ps.memo, &mut ps.scratch);
-        }
+        ps.memo.walk_unions_for(&plain, 0xff);
         let memo = &ps.memo;
         for k in 0..8 {
             let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
@@ -425,7 +421,8 @@ impl RenderScene {
     /// Any-hit for up to eight rays inside the region `tile` was prepared
     /// for (`out[k]` for `rays[k]`), the same as [`RenderScene::occluded_in`]
     /// ray by ray: eight rays in range (a tile's shadow rays towards one
-    /// light) walk the tile's wide unions of leaves together first.
+    /// light) walk the tile's wide unions of leaves together (when the
+    /// first of them asks for one).
     pub fn occluded_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [bool], tile: Option<&TileView>) {
         let n = rays.len().min(out.len());
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
@@ -433,9 +430,7 @@ impl RenderScene {
             Some(t) if n == 8 && !t.unions.is_empty() && rays.iter().all(plain) => {
                 let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
                 ps.memo.clear();
-                for &r in t.unions {
-                    t.prog.record_union8(&self.leaves, r, &ctx, 0xff, &mut ps.memo, &mut ps.scratch);
-                }
+                ps.memo.walk_unions_for(&ctx, 0xff);
                 let memo = &ps.memo;
                 for k in 0..8 {
                     out[k] = self.occluded_ctx(&RayCtx { memo: Some((memo, k)), ..ctx[k] }, &mut ps.scratch, tile);

@@ -32,7 +32,7 @@ pub struct TileScratch {
     listed: bool,
     /// The roots (in `tp.prog`) of the objects kept whose tile program is a
     /// wide union of leaves: a packet of the tile's rays walks them together
-    /// ([`Program::record_union8`]).
+    /// (`PacketMemo::walk_unions_for`).
     unions: Vec<u32>,
     /// Program the tables above were made for.
     program_id: u64,
