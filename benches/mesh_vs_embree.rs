@@ -1,7 +1,8 @@
 //! Closest-hit throughput of `MeshData` beside Embree 3 on the same rays.
 //!
-//! Builds the bunny (`scenes/bunny.obj`, 3674 triangles) subdivided by edge
-//! midpoints (`RB_SUBDIV` times, default 4: 940 544 triangles, still closed),
+//! Builds the bunny (`scenes/bunny.obj`, 3674 triangles, loaded by
+//! `rothray::io::load_mesh`) subdivided by edge midpoints (`RB_SUBDIV` times,
+//! default 4: 940 544 triangles, still closed),
 //! writes it and two ray sets (camera rays of a 1920x1080 view in 4x2 packets,
 //! and random incoherent rays through the bounding box) to `RB_DIR`, runs the
 //! Embree program (`RB_EMBREE`, built by `benches/embree/run.sh`) on them if it
@@ -40,28 +41,6 @@ struct Ray {
 
 fn env<T: std::str::FromStr>(k: &str, default: T) -> T {
     std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
-}
-
-fn load_obj(path: &Path) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let (mut pos, mut tris) = (vec![], vec![]);
-    for line in text.lines() {
-        let mut it = line.split_whitespace();
-        match it.next() {
-            Some("v") => {
-                let v: Vec<f32> = it.take(3).map(|s| s.parse().unwrap()).collect();
-                pos.push(Vec3::new(v[0], v[1], v[2]));
-            }
-            Some("f") => {
-                let f: Vec<u32> = it.map(|s| s.split('/').next().unwrap().parse::<u32>().unwrap() - 1).collect();
-                for k in 1..f.len() - 1 {
-                    tris.push([f[0], f[k], f[k + 1]]);
-                }
-            }
-            _ => {}
-        }
-    }
-    (pos, tris)
 }
 
 /// One level of midpoint subdivision (each triangle -> 4, orientation kept; the
@@ -255,7 +234,9 @@ fn main() {
     let embree: PathBuf = std::env::var("RB_EMBREE").map(PathBuf::from).unwrap_or_else(|_| dir.join("embree_bench"));
     std::fs::create_dir_all(&dir).unwrap();
 
-    let (mut pos, mut tris) = load_obj(&root.join("scenes/bunny.obj"));
+    // Through the io crate, as a scene's mesh is loaded (its warnings are
+    // for damaged files; the bunny is closed and has none).
+    let (mut pos, mut tris, _warnings) = rothray::io::load_mesh(&root.join("scenes/bunny.obj")).expect("scenes/bunny.obj loads");
     for _ in 0..levels {
         tris = subdivide(&mut pos, &tris);
     }
