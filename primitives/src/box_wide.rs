@@ -91,19 +91,6 @@ impl BoxWide {
         self.nodes.is_empty()
     }
 
-    /// The root's box (empty for an empty tree).
-    pub fn bounds(&self) -> Aabb {
-        let Some(n) = self.nodes.first() else { return Aabb::EMPTY };
-        let mut b = Aabb::EMPTY;
-        for s in 0..4 {
-            let (lo, hi) = n.slot(s);
-            if lo.cmple(hi).all() {
-                b = b.union(&Aabb::new(lo, hi));
-            }
-        }
-        b
-    }
-
     /// Walks the tree for the lanes in `active` of `rays`, nearest boxes
     /// first: `v.visit(id, lanes, ..)` for every payload `id` of a leaf
     /// whose box the ranges `[tmin[k], thi[k]]` of `lanes` meet (conservatively, as

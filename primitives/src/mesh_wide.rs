@@ -276,11 +276,6 @@ impl Node4 {
     pub(crate) fn child(&self, s: u32) -> u32 {
         self.child[s as usize]
     }
-
-    /// Child slot `s`'s box as (min, max) (min > max for an empty slot).
-    pub(crate) fn slot(&self, s: usize) -> (Vec3, Vec3) {
-        (Vec3::new(self.b[0][s], self.b[2][s], self.b[4][s]), Vec3::new(self.b[1][s], self.b[3][s], self.b[5][s]))
-    }
 }
 
 impl TriBlock {
