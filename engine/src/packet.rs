@@ -296,10 +296,10 @@ impl RenderScene {
             && o.is_finite()
             && rays.iter().all(|r| r.origin == o && r.dir.is_finite() && r.dir != Vec3::ZERO && r.tmin <= r.tmax)
             && rays.iter().all(|r| Ray::dir_rescale(r.dir).is_none());
-        let unions = tile.map_or(&[][..], |t| t.unions);
+        let unions = tile.is_some_and(|t| t.unions);
         if !meshes {
             let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
-            if n == 8 && !unions.is_empty() && rays.iter().all(plain) {
+            if n == 8 && unions && rays.iter().all(plain) {
                 self.union_packet(rays, ps, out, normals, tile);
                 return;
             }
@@ -373,7 +373,7 @@ impl RenderScene {
             }
         }
         // The tile's wide unions, walked for the packet's rays on demand.
-        if !unions.is_empty() {
+        if unions {
             let plain: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: None });
             ps.memo.walk_unions_for(&plain, left);
         }
@@ -427,7 +427,7 @@ impl RenderScene {
         let n = rays.len().min(out.len());
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
         match tile {
-            Some(t) if n == 8 && !t.unions.is_empty() && rays.iter().all(plain) => {
+            Some(t) if n == 8 && t.unions && rays.iter().all(plain) => {
                 let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
                 ps.memo.clear();
                 ps.memo.walk_unions_for(&ctx, 0xff);

@@ -4,6 +4,7 @@
 //! swept towards the light), then the pixels.
 
 use glam::Vec3;
+use smallvec::SmallVec;
 
 use crate::packet::PacketScratch;
 use crate::render::{hash2, shade, Aov, CameraRays, RenderSettings};
@@ -54,6 +55,8 @@ pub(crate) struct Worker {
     light: Vec<Vec3>,
     origin: Vec<Vec3>,
     facing: Vec<Vec3>,
+    /// The pixels (in packet order) that cast a shadow ray to the light at hand.
+    lit: Vec<usize>,
 }
 
 impl Worker {
@@ -217,46 +220,32 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
     for l in &s.lights {
         let to_l = -l.direction.normalize_or_zero();
         // The shadow rays of this light: hits whose surface faces it.
+        wk.lit.clear();
+        wk.lit.extend((0..n).filter(|&k| wk.hits[k].is_some() && wk.facing[k].dot(to_l) > 0.0));
         let mut region = Aabb::EMPTY;
-        for k in 0..n {
-            if wk.hits[k].is_some() && wk.facing[k].dot(to_l) > 0.0 {
-                region.grow(wk.origin[k]);
-            }
+        for &k in &wk.lit {
+            region.grow(wk.origin[k]);
         }
         if region.is_empty() {
             continue;
         }
-        let any = scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts);
+        wk.shadows += wk.lit.len() as u64;
+        if !scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts) {
+            for &k in &wk.lit {
+                wk.light[k] += l.color * wk.facing[k].dot(to_l);
+            }
+            continue;
+        }
         let view = wk.shadow_ts.view();
-        // The shadow rays in packets of eight (parallel rays from the tile's
-        // hits: the tile's wide unions are walked once per packet).
-        let mut lanes = [0usize; 8];
-        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); 8];
-        let mut m = 0;
-        for k in 0..=n {
-            if k < n {
-                let c = wk.facing[k].dot(to_l);
-                if wk.hits[k].is_none() || c <= 0.0 {
-                    continue;
-                }
-                wk.shadows += 1;
-                (lanes[m], rays[m]) = (k, Ray::new(wk.origin[k], to_l));
-                m += 1;
-                if m < 8 {
-                    continue;
-                }
-            }
+        // In packets of eight (parallel rays from the tile's hits: the tile's
+        // wide unions are walked once per packet).
+        for chunk in wk.lit.chunks(8) {
+            let rays: SmallVec<[Ray; 8]> = chunk.iter().map(|&k| Ray::new(wk.origin[k], to_l)).collect();
             let mut blocked = [false; 8];
-            if any && m > 0 {
-                scene.occluded_packet(&rays[..m], &mut wk.ps, &mut blocked, Some(&view));
+            scene.occluded_packet(&rays, &mut wk.ps, &mut blocked, Some(&view));
+            for (&k, _) in chunk.iter().zip(blocked).filter(|(_, b)| !b) {
+                wk.light[k] += l.color * wk.facing[k].dot(to_l);
             }
-            for j in 0..m {
-                if !blocked[j] {
-                    let kk = lanes[j];
-                    wk.light[kk] += l.color * wk.facing[kk].dot(to_l);
-                }
-            }
-            m = 0;
         }
     }
     for k in 0..n {

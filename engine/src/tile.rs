@@ -30,10 +30,10 @@ pub struct TileScratch {
     /// them, when there are at most [`OBJECT_LIST`] (`listed`).
     boxes: BoxList,
     listed: bool,
-    /// The roots (in `tp.prog`) of the objects kept whose tile program is a
-    /// wide union of leaves: a packet of the tile's rays walks them together
-    /// (`PacketMemo::walk_unions_for`).
-    unions: Vec<u32>,
+    /// Is some kept object's tile program a wide union of leaves (which a
+    /// packet of the tile's rays walks together,
+    /// `PacketMemo::walk_unions_for`)?
+    unions: bool,
     /// Program the tables above were made for.
     program_id: u64,
     /// Counts since the last [`TileScratch::take_counts`].
@@ -75,8 +75,8 @@ pub struct TileView<'a> {
     root_of: &'a [u32],
     /// The bounded objects the tile meets, when it lists them.
     pub(crate) bounded: Option<&'a BoxList>,
-    /// Roots of the objects that packets walk together (see `TileScratch`).
-    pub(crate) unions: &'a [u32],
+    /// Has the tile objects that packets walk together (see `TileScratch`)?
+    pub(crate) unions: bool,
 }
 
 impl TileView<'_> {
@@ -98,7 +98,7 @@ impl TileView<'_> {
 impl TileScratch {
     /// The view of the tile last prepared.
     pub fn view(&self) -> TileView<'_> {
-        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(&self.boxes), unions: &self.unions }
+        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(&self.boxes), unions: self.unions }
     }
 
     /// The counts so far, reset.
@@ -148,13 +148,7 @@ impl RenderScene {
                 ts.boxes.push(&self.objects[oi as usize].bounds, oi);
             }
         }
-        ts.unions.clear();
-        for &oi in &ts.live {
-            let r = ts.root_of[oi as usize];
-            if ts.tp.prog.is_packet_union(r) {
-                ts.unions.push(r);
-            }
-        }
+        ts.unions = ts.live.iter().any(|&oi| ts.tp.prog.is_packet_union(ts.root_of[oi as usize]));
         let TileScratch { live, counts, .. } = ts;
         counts.tiles += 1;
         counts.objects_kept += live.len() as u64;
