@@ -30,8 +30,21 @@ fn wide_tree(rng: &mut SmallRng) -> Shape {
         }
     };
     let mut kids: Vec<Shape> = (0..n).map(|_| small(rng)).collect();
-    // Coincident surfaces: copies of earlier children, and boxes sharing a face.
-    for _ in 0..rng.gen_range(0..4) {
+    insert_twins(rng, &mut kids, 4);
+    if rng.gen_bool(0.5) {
+        Shape::Union(kids)
+    } else {
+        let mut d = vec![random_tree(rng, 1)];
+        d.extend(kids);
+        Shape::Diff(d)
+    }
+}
+
+/// Coincident surfaces: inserts fewer than `most` copies of children of
+/// `kids` at random places, a box sometimes shifted to share a face with
+/// its original instead.
+fn insert_twins(rng: &mut SmallRng, kids: &mut Vec<Shape>, most: usize) {
+    for _ in 0..rng.gen_range(0..most) {
         let k = rng.gen_range(0..kids.len());
         let twin = match &kids[k] {
             Shape::Box { min, max } if rng.gen_bool(0.5) => {
@@ -43,13 +56,23 @@ fn wide_tree(rng: &mut SmallRng) -> Shape {
         let at = rng.gen_range(0..=kids.len());
         kids.insert(at, twin);
     }
-    if rng.gen_bool(0.5) {
-        Shape::Union(kids)
-    } else {
-        let mut d = vec![random_tree(rng, 1)];
-        d.extend(kids);
-        Shape::Diff(d)
-    }
+}
+
+/// The direction at `(s, w)` of the pyramid with edge directions `e`
+/// (bilinear: the corners at 0 and 1).
+fn pyramid_dir(e: &[DVec3; 4], (s, w): (f64, f64)) -> DVec3 {
+    (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w
+}
+
+/// Eight rays from `o` inside the pyramid with edge directions `e`: its
+/// four corners, then four at random, each direction scaled by 0.5-2.
+fn packet_in_pyramid(rng: &mut SmallRng, o: DVec3, e: &[DVec3; 4]) -> Vec<Ray> {
+    (0..8)
+        .map(|k| {
+            let sw = if k < 4 { ((k % 2) as f64, (k / 2) as f64) } else { (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) };
+            to_ray(o, pyramid_dir(e, sw) * rng.gen_range(0.5..2.0))
+        })
+        .collect()
 }
 
 /// A random scene: a deep tree (with meshes in every fourth case), up to two
@@ -102,14 +125,7 @@ fn tile_programs_give_every_ray_the_whole_programs_answer() {
                 let any = scene.prepare_tile(&region, &mut ts);
                 culled += (!any) as u64;
                 // Eight rays inside the tile (corners and edges included).
-                let packet: Vec<Ray> = (0..8)
-                    .map(|k| {
-                        let (s, w) =
-                            if k < 4 { ((k % 2) as f64, (k / 2) as f64) } else { (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) };
-                        let dir = (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w;
-                        to_ray(o, dir * rng.gen_range(0.5..2.0))
-                    })
-                    .collect();
+                let packet = packet_in_pyramid(&mut rng, o, &e);
                 let mut out = [None; 8];
                 if any {
                     let view = ts.view();
@@ -236,9 +252,8 @@ fn tiles_of_many_objects_keep_ties_between_objects() {
                 }
                 let packet: Vec<Ray> = (0..8)
                     .map(|_| {
-                        let (s, w) = (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0));
-                        let dir = (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w;
-                        to_ray(o, dir)
+                        let sw = (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0));
+                        to_ray(o, pyramid_dir(&e, sw))
                     })
                     .collect();
                 let mut out = [None; 8];
@@ -277,18 +292,7 @@ fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
         };
         kids.push(if rng.gen_bool(0.2) { random_xf(rng, s) } else { s });
     }
-    for _ in 0..rng.gen_range(0..5) {
-        let k = rng.gen_range(0..kids.len());
-        let twin = match &kids[k] {
-            Shape::Box { min, max } if rng.gen_bool(0.5) => {
-                let w = max.x - min.x;
-                Shape::Box { min: *min + DVec3::new(w, 0.0, 0.0), max: *max + DVec3::new(w, 0.0, 0.0) }
-            }
-            other => other.clone(),
-        };
-        let at = rng.gen_range(0..=kids.len());
-        kids.insert(at, twin);
-    }
+    insert_twins(rng, &mut kids, 5);
     Shape::Union(kids)
 }
 
@@ -341,15 +345,7 @@ fn packets_walk_wide_unions_together() {
                     (rays, Frustum::sweep(&org, d.as_vec3()))
                 } else {
                     let (e, region) = pyramid_around(o, d, half);
-                    let rays = (0..8)
-                        .map(|k| {
-                            let (s, w) =
-                                if k < 4 { ((k % 2) as f64, (k / 2) as f64) } else { (rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) };
-                            let dir = (e[0] * (1.0 - s) + e[1] * s) * (1.0 - w) + (e[3] * (1.0 - s) + e[2] * s) * w;
-                            to_ray(o, dir * rng.gen_range(0.5..2.0))
-                        })
-                        .collect();
-                    (rays, region)
+                    (packet_in_pyramid(&mut rng, o, &e), region)
                 };
                 let mut out = [None; 8];
                 let mut blocked = [false; 8];
