@@ -188,14 +188,8 @@ impl BoxWide {
                 let lower = stack.iter().fold(t_top, |m, e| m.min(e.2));
                 v.settle(lower - lower.abs() * SLAB_EPS, &mut hi.0);
                 let (c, m, t) = stack.pop().expect("not empty");
-                // `t` is at most each lane's own entry: lanes whose range now
-                // ends before it drop out.
-                let tt = t - t.abs() * SLAB_EPS;
-                let mut m2 = 0;
-                for k in 0..8 {
-                    m2 |= ((tt <= hi.0[k]) as u32) << k;
-                }
-                m2 &= m;
+                // Lanes whose range now ends before it drop out.
+                let m2 = hi.reaching(t) & m;
                 if m2 != 0 {
                     (cur, mask) = (c, m2);
                     break;

@@ -1050,13 +1050,8 @@ impl MeshData {
                 sp -= 1;
                 // SAFETY: slots below `sp` were written when pushed.
                 let (c, m, t) = unsafe { stack[sp].assume_init() };
-                // `t` is at most each ray's own entry: rays whose best hit is nearer drop out.
-                let tt = t - t.abs() * SLAB_EPS;
-                let mut m2 = 0;
-                for k in 0..8 {
-                    m2 |= ((tt <= thi.0[k]) as u32) << k;
-                }
-                m2 &= m;
+                // Rays whose best hit is nearer drop out.
+                let m2 = thi.reaching(t) & m;
                 if m2 != 0 {
                     (cur, mask) = (c, m2);
                     break;

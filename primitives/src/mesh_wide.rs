@@ -432,6 +432,20 @@ impl F8 {
         unsafe { std::arch::x86_64::_mm256_load_ps(self.0.as_ptr()) }
     }
 
+    /// The lanes (bit k = lane k) whose range end `self` reaches a deferred
+    /// subtree entered at `t` (the smallest entry among the lanes that met
+    /// it, so at most each one's own; with the slab test's slack): the
+    /// lanes of a packet walk that still need that subtree.
+    #[inline(always)]
+    pub(crate) fn reaching(&self, t: f32) -> u32 {
+        let tt = t - t.abs() * super::SLAB_EPS;
+        let mut m = 0;
+        for k in 0..8 {
+            m |= ((tt <= self.0[k]) as u32) << k;
+        }
+        m
+    }
+
     /// Bit k set where lane k of `self` >= lane k of `other` (false on NaN).
     #[inline(always)]
     pub(crate) fn ge_mask(&self, other: &F8) -> u32 {
