@@ -91,30 +91,15 @@ pub fn roots_in_tol(c: &[f64], lo: f64, hi: f64, eps: f64, out: &mut [f64; MAX_D
         }
         return count;
     }
-    let refine = |mut a: f64, mut b: f64, fa: f64| -> f64 {
-        let neg_at_a = fa < 0.0;
-        let mut x = 0.5 * (a + b);
+    let refine = |a: f64, b: f64, fa: f64| -> f64 {
+        let mut br = Bracket { a, b, neg_at_a: fa < 0.0, x: 0.5 * (a + b) };
         for _ in 0..100 {
-            let (f, df) = eval_d(c, x);
-            if f == 0.0 {
-                return x;
+            let (f, df) = eval_d(c, br.x);
+            if let Some(r) = br.step(f, df, eps) {
+                return r;
             }
-            if (f < 0.0) == neg_at_a {
-                a = x
-            } else {
-                b = x
-            }
-            let mut nx = x - f / df;
-            if !(nx > a && nx < b) {
-                nx = 0.5 * (a + b);
-            }
-            let tol = eps.max(1e-15 * (1.0 + x.abs()));
-            if (nx - x).abs() <= tol || b - a <= tol {
-                return nx;
-            }
-            x = nx;
         }
-        x
+        br.x
     };
     let mut d = [0.0f64; MAX_DEGREE + 1];
     for i in 1..n {
@@ -297,34 +282,43 @@ pub fn bern_restrict<const N: usize>(b: &mut [f64; N], t0: f64, t1: f64) {
     }
 }
 
-/// Safeguarded Newton in the bracket `(a, b)` holding one sign change
-/// (`neg_at_a`: the sign just right of `a`), from `x`; Newton steps that leave the
-/// bracket become bisections. Stops when a step or the bracket is below
-/// `tol = max(eps, 1e-15 (1 + |x|))`, or when two Newton steps in a row show
-/// quadratic convergence that puts the next iterate within `tol / 10` of the
-/// root (error after a step `s_k` about `K s_k^2`, `K ~ s_k / s_{k-1}^2`): that
-/// saves the evaluation that would only confirm it.
+/// Safeguarded Newton on a polynomial in a bracket `[a, b]` holding one sign
+/// change (`neg_at_a`: the sign just right of `a`), at `x`: Newton steps that
+/// leave the bracket become bisections, and it is done when a step or the
+/// bracket is below `max(eps, 1e-15 (1 + |x|))`. The step of
+/// [`roots_in_tol`], of [`Newton`] (which may stop earlier) and of the
+/// torus's quartic (`quartic.rs`).
 #[derive(Clone, Copy)]
-struct Newton {
-    a: f64,
-    b: f64,
-    neg_at_a: bool,
-    x: f64,
-    /// Last Newton step length (infinite after a bisection).
-    prev: f64,
+pub(crate) struct Bracket {
+    pub(crate) a: f64,
+    pub(crate) b: f64,
+    pub(crate) neg_at_a: bool,
+    pub(crate) x: f64,
 }
 
-impl Newton {
-    fn new(a: f64, b: f64, neg_at_a: bool, x: f64) -> Self {
-        Newton { a, b, neg_at_a, x, prev: f64::INFINITY }
-    }
+/// What a [`Bracket`] step gives: the root, or the next iterate.
+pub(crate) enum Proposal {
+    Root(f64),
+    Next(Next),
+}
 
-    /// One step from the value and derivative at `self.x`: the root when done.
+/// The next iterate `nx`, whether it is a Newton step (not a bisection),
+/// its length `s` and the tolerance `tol` it was measured against.
+pub(crate) struct Next {
+    nx: f64,
+    newton: bool,
+    s: f64,
+    tol: f64,
+}
+
+impl Bracket {
+    /// One step from the value `f` and derivative `df` at `x`: the bracket
+    /// narrows to the side holding the sign change, then the next iterate.
     #[inline(always)]
-    fn step(&mut self, f: f64, df: f64, eps: f64) -> Option<f64> {
+    pub(crate) fn propose(&mut self, f: f64, df: f64, eps: f64) -> Proposal {
         let x = self.x;
         if f == 0.0 {
-            return Some(x);
+            return Proposal::Root(x);
         }
         if (f < 0.0) == self.neg_at_a {
             self.a = x
@@ -340,14 +334,56 @@ impl Newton {
         let tol = eps.max(1e-15 * (1.0 + x.abs()));
         let s = (nx - x).abs();
         if s <= tol || b - a <= tol {
-            return Some(nx);
+            return Proposal::Root(nx);
         }
+        Proposal::Next(Next { nx, newton, s, tol })
+    }
+
+    /// [`Bracket::propose`], moving to the next iterate: the root when done.
+    #[inline(always)]
+    pub(crate) fn step(&mut self, f: f64, df: f64, eps: f64) -> Option<f64> {
+        match self.propose(f, df, eps) {
+            Proposal::Root(r) => Some(r),
+            Proposal::Next(n) => {
+                self.x = n.nx;
+                None
+            }
+        }
+    }
+}
+
+/// Safeguarded Newton in the bracket `(a, b)` holding one sign change
+/// (`neg_at_a`: the sign just right of `a`), from `x`; Newton steps that leave the
+/// bracket become bisections. Stops when a step or the bracket is below
+/// `tol = max(eps, 1e-15 (1 + |x|))`, or when two Newton steps in a row show
+/// quadratic convergence that puts the next iterate within `tol / 10` of the
+/// root (error after a step `s_k` about `K s_k^2`, `K ~ s_k / s_{k-1}^2`): that
+/// saves the evaluation that would only confirm it.
+#[derive(Clone, Copy)]
+struct Newton {
+    br: Bracket,
+    /// Last Newton step length (infinite after a bisection).
+    prev: f64,
+}
+
+impl Newton {
+    fn new(a: f64, b: f64, neg_at_a: bool, x: f64) -> Self {
+        Newton { br: Bracket { a, b, neg_at_a, x }, prev: f64::INFINITY }
+    }
+
+    /// One step from the value and derivative at `self.br.x`: the root when done.
+    #[inline(always)]
+    fn step(&mut self, f: f64, df: f64, eps: f64) -> Option<f64> {
+        let Next { nx, newton, s, tol } = match self.br.propose(f, df, eps) {
+            Proposal::Root(r) => return Some(r),
+            Proposal::Next(n) => n,
+        };
         let prev = self.prev;
         if newton && prev.is_finite() && s < 0.5 * prev && s * s * s <= 0.1 * tol * prev * prev {
             return Some(nx);
         }
         self.prev = if newton { s } else { f64::INFINITY };
-        self.x = nx;
+        self.br.x = nx;
         None
     }
 }
@@ -356,12 +392,12 @@ impl Newton {
 #[inline]
 fn refine_bracket<const N: usize>(c: &[f64; N], mut nt: Newton, eps: f64) -> f64 {
     for _ in 0..100 {
-        let (f, df) = eval_d(c, nt.x);
+        let (f, df) = eval_d(c, nt.br.x);
         if let Some(r) = nt.step(f, df, eps) {
             return r;
         }
     }
-    nt.x
+    nt.br.x
 }
 
 /// Two [`refine_bracket`]s at once, their evaluations interleaved (Horner is
@@ -371,7 +407,7 @@ fn refine_bracket<const N: usize>(c: &[f64; N], mut nt: Newton, eps: f64) -> f64
 fn refine_pair<const N: usize>(c: &[f64; N], mut n0: Newton, mut n1: Newton, eps: f64) -> (f64, f64) {
     let (mut r0, mut r1) = (None, None);
     for _ in 0..100 {
-        let (x0, x1) = (n0.x, n1.x);
+        let (x0, x1) = (n0.br.x, n1.br.x);
         let (mut p0, mut d0, mut p1, mut d1) = (0.0, 0.0, 0.0, 0.0);
         for &k in c.iter().rev() {
             d0 = d0 * x0 + p0;
@@ -389,7 +425,7 @@ fn refine_pair<const N: usize>(c: &[f64; N], mut n0: Newton, mut n1: Newton, eps
             break;
         }
     }
-    (r0.unwrap_or(n0.x), r1.unwrap_or(n1.x))
+    (r0.unwrap_or(n0.br.x), r1.unwrap_or(n1.br.x))
 }
 
 /// Deepest subdivision of [`bern_roots`] (2^-52 of the interval is f64's

@@ -11,6 +11,8 @@
 //! each quartic root's Newton starts from a quadratic model at the bracket's
 //! extremum, not the bracket's midpoint.
 
+use crate::poly::Bracket;
+
 /// `q(s)` by Horner, in the same order as [`crate::poly::eval`] on
 /// `[c0, c1, c2, 0, 1]` (the same rounding as the generic path).
 #[inline(always)]
@@ -89,46 +91,6 @@ pub fn depressed_cubic_roots(p: f64, r: f64, out: &mut [f64; 3]) -> usize {
     out[1] = polish(mid);
     out[2] = polish(hi);
     3
-}
-
-/// Safeguarded Newton on `q` in a bracket `[a, b]` holding one sign change
-/// (`neg_at_a`: the sign just right of `a`), at `x`: Newton steps that leave
-/// the bracket become bisections. The same stopping rule as
-/// [`crate::poly::roots_in_tol`] (a step or the bracket below
-/// `max(eps, 1e-15 (1 + |x|))`), so the roots are as accurate as there.
-#[derive(Clone, Copy)]
-struct Bracket {
-    a: f64,
-    b: f64,
-    neg_at_a: bool,
-    x: f64,
-}
-
-impl Bracket {
-    /// One step from `q(x)`, `q'(x)`: the root when done.
-    #[inline(always)]
-    fn step(&mut self, f: f64, df: f64, eps: f64) -> Option<f64> {
-        let x = self.x;
-        if f == 0.0 {
-            return Some(x);
-        }
-        if (f < 0.0) == self.neg_at_a {
-            self.a = x
-        } else {
-            self.b = x
-        }
-        let (a, b) = (self.a, self.b);
-        let mut nx = x - f / df;
-        if !(nx > a && nx < b) {
-            nx = 0.5 * (a + b);
-        }
-        let tol = eps.max(1e-15 * (1.0 + x.abs()));
-        if (nx - x).abs() <= tol || b - a <= tol {
-            return Some(nx);
-        }
-        self.x = nx;
-        None
-    }
 }
 
 /// [`Bracket::step`] to the end (at most 100 steps).
