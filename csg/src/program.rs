@@ -163,6 +163,8 @@ pub struct PacketMemo {
     len: usize,
     /// Wide unions walked for the packet, on demand (see `union_packet.rs`).
     unions: std::cell::RefCell<union_packet::UnionRecords>,
+    /// Analytic leaves solved for the packet, on demand (see `leaf_packet.rs`).
+    leaf_solves: std::cell::RefCell<leaf_packet::LeafRecords>,
 }
 
 /// One leaf's (or one wide union's) record.
@@ -184,6 +186,7 @@ impl PacketMemo {
     pub fn clear(&mut self) {
         self.len = 0;
         self.unions.get_mut().clear();
+        self.leaf_solves.get_mut().clear();
     }
 
     /// Records leaf `leaf` queried on `[tmin[k], tmax[k]]` per lane: `fill` pushes
@@ -271,9 +274,16 @@ fn leaf_spans<S: SpanSink + ?Sized>(
     out: &mut S,
 ) -> f32 {
     counts::leaf();
-    if let (Some((memo, k)), Some(_)) = (ctx.memo, nearest) {
-        if let Some(v) = memo.serve(k, i, lo, hi, out) {
-            return v;
+    if let Some((memo, k)) = ctx.memo {
+        // An analytic leaf from the packet's solve; a mesh from its walk.
+        if leaves.has_kernel8(i) {
+            if let Some(v) = memo.leaf_lane(leaves, i, k, (lo, hi), out) {
+                return v;
+            }
+        } else if nearest.is_some() {
+            if let Some(v) = memo.serve(k, i, lo, hi, out) {
+                return v;
+            }
         }
     }
     leaves.spans_for(i, &ctx.ray, (lo, hi), nearest, out)
@@ -1079,5 +1089,7 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
     }
 }
 
+#[path = "leaf_packet.rs"]
+mod leaf_packet;
 #[path = "union_packet.rs"]
 mod union_packet;

@@ -197,7 +197,16 @@ fn containing_leaves(program: &Program, n: u32, out: &mut Vec<u32>) {
     }
 }
 
-/// Is some leaf under node `n` a mesh?
+/// The origins of eight rays.
+fn rays_o(rays: &[Ray]) -> [Vec3; 8] {
+    std::array::from_fn(|k| rays[k].origin)
+}
+
+/// The directions of eight rays.
+fn rays_d(rays: &[Ray]) -> [Vec3; 8] {
+    std::array::from_fn(|k| rays[k].dir)
+}
+
 /// Bake step of the packet path: the nearest-mode meshes traced ahead per
 /// packet, the objects they cover, and the [`Shortcut`] for scenes with few
 /// leaves. Runs after the program and objects are baked.
@@ -299,8 +308,8 @@ impl RenderScene {
         let unions = tile.is_some_and(|t| t.unions);
         if !meshes {
             let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
-            if n == 8 && unions && rays.iter().all(plain) {
-                self.union_packet(rays, ps, out, normals, tile);
+            if n == 8 && rays.iter().all(plain) {
+                self.lane_packet(rays, ps, out, normals, tile);
                 return;
             }
             for k in 0..n {
@@ -377,6 +386,8 @@ impl RenderScene {
             let plain: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: None });
             ps.memo.walk_unions_for(&plain, left);
         }
+        // Its analytic leaves, solved for all lanes when the first asks.
+        ps.memo.solve_leaves_for(&[o; 8], &d, left);
         // All eight contexts are written before the first is read: reading one
         // just built (its fields written piecewise, read with wider loads) stalls
         // on store forwarding.
@@ -403,14 +414,17 @@ impl RenderScene {
         }
     }
 
-    /// [`RenderScene::intersect_packet_with`] for eight valid rays of a tile
-    /// that has objects packets walk together (wide unions of leaves) and no
-    /// packet meshes: each ray is evaluated with a memo that walks a union
-    /// for all eight rays when the first of them asks for it.
-    fn union_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
+    /// [`RenderScene::intersect_packet_with`] for eight valid rays in range
+    /// and no packet meshes: each ray is evaluated with a memo that solves
+    /// an analytic leaf (and walks a tile's wide union of leaves) for all
+    /// eight rays when the first of them asks for it.
+    fn lane_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
         let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
         ps.memo.clear();
-        ps.memo.walk_unions_for(&plain, 0xff);
+        if tile.is_some_and(|t| t.unions) {
+            ps.memo.walk_unions_for(&plain, 0xff);
+        }
+        ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
         let memo = &ps.memo;
         for k in 0..8 {
             let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
@@ -427,10 +441,13 @@ impl RenderScene {
         let n = rays.len().min(out.len());
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
         match tile {
-            Some(t) if n == 8 && t.unions && rays.iter().all(plain) => {
+            _ if n == 8 && rays.iter().all(plain) => {
                 let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
                 ps.memo.clear();
-                ps.memo.walk_unions_for(&ctx, 0xff);
+                if tile.is_some_and(|t| t.unions) {
+                    ps.memo.walk_unions_for(&ctx, 0xff);
+                }
+                ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
                 let memo = &ps.memo;
                 for k in 0..8 {
                     out[k] = self.occluded_ctx(&RayCtx { memo: Some((memo, k)), ..ctx[k] }, &mut ps.scratch, tile);

@@ -23,6 +23,7 @@ pub mod bvh;
 pub mod frustum;
 pub mod gcyl;
 pub mod kernels;
+pub mod kernels8;
 pub mod mesh;
 pub mod poly;
 pub mod polytope;

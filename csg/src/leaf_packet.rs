@@ -1,0 +1,91 @@
+//! Analytic leaves solved once per packet of eight rays: the first lane
+//! whose evaluation asks a sphere, box, cylinder or half-space for its spans
+//! solves it for every lane of the packet with the 8-lane kernels
+//! ([`LeafTable::ranges8`]); the other lanes' evaluations then find their
+//! range here and only clip it to their own query range, exactly as the
+//! leaf's own query would ([`PacketMemo::leaf_lane`]).
+//!
+//! Why: neighbouring camera rays (and a light's shadow rays from
+//! neighbouring hits) ask mostly the same leaves, and one 8-lane solve costs
+//! about what one scalar query does.
+
+use rothray_primitives::{
+    glam::Vec3,
+    kernels8::{Ranges8, Rays8Soa},
+    table::{push_clipped, LeafTable},
+    Span, SpanSink, Surf,
+};
+
+use super::PacketMemo;
+
+/// Cached leaves per packet (a direct-mapped table by leaf index: a
+/// collision only costs a second solve).
+const SLOTS: usize = 64;
+
+/// The packet's rays and the leaves solved for them.
+#[derive(Debug, Default)]
+pub(crate) struct LeafRecords {
+    /// Lanes whose rays are set (0: no packet).
+    lanes: u32,
+    rays: Rays8Soa,
+    /// Tells this packet's slots from earlier packets' (0: never).
+    generation: u32,
+    /// Per slot: (leaf, generation, its lanes).
+    slots: Vec<(u32, u32, Ranges8)>,
+}
+
+impl LeafRecords {
+    pub(crate) fn clear(&mut self) {
+        self.lanes = 0;
+    }
+}
+
+impl PacketMemo {
+    /// Lets the evaluations of the packet's lanes `lanes` (world rays
+    /// `o[k] + t d[k]`, which must be the rays of the contexts that carry
+    /// this memo) share their analytic leaves' solves.
+    pub fn solve_leaves_for(&mut self, o: &[Vec3; 8], d: &[Vec3; 8], lanes: u32) {
+        let r = self.leaf_solves.get_mut();
+        if r.slots.is_empty() {
+            r.slots.resize(SLOTS, (0, 0, Ranges8::default()));
+        }
+        r.generation = r.generation.wrapping_add(1).max(1);
+        (r.lanes, r.rays) = (lanes, Rays8Soa::new(o, d));
+    }
+
+    /// Lane `k`'s spans of leaf `i` on `range`, from the packet's solve of
+    /// the leaf (made now when no lane asked before), appended to `out`:
+    /// `Some(f32::INFINITY)` (exact everywhere, as the leaf's own query),
+    /// or `None` when the packet does not answer (no packet kernel for the
+    /// leaf's kind, the lane is not in the packet, or its local direction
+    /// needs rescaling). The caller checks [`LeafTable::has_kernel8`].
+    #[inline]
+    pub(crate) fn leaf_lane<S: SpanSink + ?Sized>(
+        &self,
+        leaves: &LeafTable,
+        i: u32,
+        k: usize,
+        range: (f32, f32),
+        out: &mut S,
+    ) -> Option<f32> {
+        let mut guard = self.leaf_solves.borrow_mut();
+        let r = &mut *guard;
+        if r.lanes & (1 << k) == 0 {
+            return None;
+        }
+        let e = &mut r.slots[i as usize % SLOTS];
+        if e.0 != i || e.1 != r.generation {
+            leaves.ranges8(i, &r.rays, r.lanes, &mut e.2);
+            (e.0, e.1) = (i, r.generation);
+        }
+        let e = &e.2;
+        if e.done & (1 << k) == 0 {
+            return None;
+        }
+        if e.hit & (1 << k) != 0 {
+            let span = Span { t0: e.t0[k], s0: Surf::new(i, e.s0[k]), t1: e.t1[k], s1: Surf::new(i, e.s1[k]) };
+            push_clipped(out, span, range.0, range.1);
+        }
+        Some(f32::INFINITY)
+    }
+}

@@ -1,0 +1,575 @@
+#![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+//! The convex analytic kernels (sphere, box, cylinder, half-space) for eight
+//! rays at once, struct-of-arrays: a packet's lanes are mapped into the
+//! leaf's local space and solved with 8-lane SIMD, AVX where the CPU has it
+//! (chosen at run time), two SSE2 halves otherwise.
+//!
+//! Every lane gets exactly what [`LeafTable::spans_in`] computes for its ray
+//! before clipping, bit for bit: the same IEEE operations on the same values
+//! in the same order as the scalar map and kernels (no fused multiply-add,
+//! whose single rounding would differ), with selects where the scalar code
+//! branches. Lanes whose local direction the scalar path would rescale
+//! ([`Ray::dir_rescale`]) are left to it. The cone (solved in f64) and the
+//! other kinds have no packet kernel.
+
+use glam::{Vec3, Vec3A};
+
+use crate::kernels::sub;
+use crate::ray::DIR_SAFE_MAX;
+use crate::table::{LeafKind, LeafTable};
+
+/// Per lane, a leaf's unclipped range along the lane's ray (as the scalar
+/// kernel's [`crate::kernels::Range`]), where bit k of `hit` is set.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Ranges8 {
+    /// Lanes computed here (the others go the scalar way).
+    pub done: u32,
+    /// Lanes (among `done`) whose line meets the leaf.
+    pub hit: u32,
+    /// Entry parameters.
+    pub t0: [f32; 8],
+    /// Entry sub-surfaces.
+    pub s0: [u32; 8],
+    /// Exit parameters.
+    pub t1: [f32; 8],
+    /// Exit sub-surfaces.
+    pub s1: [u32; 8],
+}
+
+/// Eight world rays, struct-of-arrays (built once per packet).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Rays8Soa {
+    /// Origins per axis.
+    o: [[f32; 8]; 3],
+    /// Directions per axis.
+    d: [[f32; 8]; 3],
+}
+
+impl Rays8Soa {
+    /// The rays `o[k] + t d[k]`.
+    pub fn new(o: &[Vec3; 8], d: &[Vec3; 8]) -> Self {
+        Rays8Soa {
+            o: std::array::from_fn(|a| std::array::from_fn(|k| o[k][a])),
+            d: std::array::from_fn(|a| std::array::from_fn(|k| d[k][a])),
+        }
+    }
+}
+
+/// The 8-lane float operations the kernels use; a mask is a vector whose
+/// lanes are all ones (true) or all zeros.
+trait V8: Copy {
+    fn splat(x: f32) -> Self;
+    fn load(a: &[f32; 8]) -> Self;
+    fn store(self) -> [f32; 8];
+    /// Lanes holding small whole numbers, as integers.
+    fn store_u32(self) -> [u32; 8];
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+    fn mul(self, o: Self) -> Self;
+    fn div(self, o: Self) -> Self;
+    fn sqrt(self) -> Self;
+    fn abs(self) -> Self;
+    fn neg(self) -> Self;
+    /// `self` with the sign bit of `s` (`f32::copysign`).
+    fn copysign(self, s: Self) -> Self;
+    fn max(self, o: Self) -> Self;
+    fn le(self, o: Self) -> Self;
+    fn lt(self, o: Self) -> Self;
+    fn ge(self, o: Self) -> Self;
+    fn gt(self, o: Self) -> Self;
+    fn eq(self, o: Self) -> Self;
+    fn and(self, o: Self) -> Self;
+    fn or(self, o: Self) -> Self;
+    /// `!self & o`, bitwise.
+    fn andnot(self, o: Self) -> Self;
+    /// Lanes of `a` where `m`, else of `b`.
+    fn select(m: Self, a: Self, b: Self) -> Self;
+    fn bitmask(self) -> u32;
+}
+
+#[cfg(target_arch = "x86_64")]
+mod sse {
+    use std::arch::x86_64::*;
+
+    /// Two SSE2 halves (every x86_64 CPU has SSE2).
+    #[derive(Clone, Copy)]
+    pub(super) struct Sse(pub(super) [__m128; 2]);
+
+    macro_rules! each {
+        ($f:ident, $a:expr, $b:expr) => {
+            unsafe { Sse([$f($a.0[0], $b.0[0]), $f($a.0[1], $b.0[1])]) }
+        };
+    }
+
+    // SAFETY (every method): SSE2 is part of x86_64.
+    impl super::V8 for Sse {
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            unsafe { Sse([_mm_set1_ps(x); 2]) }
+        }
+        #[inline(always)]
+        fn load(a: &[f32; 8]) -> Self {
+            unsafe { Sse([_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(a.as_ptr().add(4))]) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            unsafe {
+                _mm_storeu_ps(a.as_mut_ptr(), self.0[0]);
+                _mm_storeu_ps(a.as_mut_ptr().add(4), self.0[1]);
+            }
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe {
+                _mm_storeu_si128(a.as_mut_ptr() as *mut __m128i, _mm_cvttps_epi32(self.0[0]));
+                _mm_storeu_si128(a.as_mut_ptr().add(4) as *mut __m128i, _mm_cvttps_epi32(self.0[1]));
+            }
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            each!(_mm_add_ps, self, o)
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            each!(_mm_sub_ps, self, o)
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            each!(_mm_mul_ps, self, o)
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            each!(_mm_div_ps, self, o)
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { Sse([_mm_sqrt_ps(self.0[0]), _mm_sqrt_ps(self.0[1])]) }
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm_andnot_ps, m, self)
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm_xor_ps, m, self)
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            let m = Self::splat(-0.0);
+            let sign = each!(_mm_and_ps, s, m);
+            let mag = each!(_mm_andnot_ps, m, self);
+            each!(_mm_or_ps, sign, mag)
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            each!(_mm_max_ps, self, o)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            each!(_mm_cmple_ps, self, o)
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> Self {
+            each!(_mm_cmplt_ps, self, o)
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            each!(_mm_cmpge_ps, self, o)
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            each!(_mm_cmpgt_ps, self, o)
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            each!(_mm_cmpeq_ps, self, o)
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            each!(_mm_and_ps, self, o)
+        }
+        #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            each!(_mm_or_ps, self, o)
+        }
+        #[inline(always)]
+        fn andnot(self, o: Self) -> Self {
+            each!(_mm_andnot_ps, self, o)
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            // (m & a) | (!m & b): SSE2 has no blend.
+            let x = each!(_mm_and_ps, m, a);
+            let y = each!(_mm_andnot_ps, m, b);
+            each!(_mm_or_ps, x, y)
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            unsafe { (_mm_movemask_ps(self.0[0]) | _mm_movemask_ps(self.0[1]) << 4) as u32 }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use std::arch::x86_64::*;
+
+    /// One AVX register; only used inside functions compiled with AVX.
+    #[derive(Clone, Copy)]
+    pub(super) struct Avx(pub(super) __m256);
+
+    // SAFETY (every method): only called from `ranges8_avx`, compiled with
+    // AVX and reached only when the CPU has it; inlined there.
+    impl super::V8 for Avx {
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            unsafe { Avx(_mm256_set1_ps(x)) }
+        }
+        #[inline(always)]
+        fn load(a: &[f32; 8]) -> Self {
+            unsafe { Avx(_mm256_loadu_ps(a.as_ptr())) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe { _mm256_storeu_si256(a.as_mut_ptr() as *mut __m256i, _mm256_cvttps_epi32(self.0)) };
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_add_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_sub_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_mul_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_div_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { Avx(_mm256_sqrt_ps(self.0)) }
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            unsafe { Avx(_mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0)) }
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            unsafe { Avx(_mm256_xor_ps(_mm256_set1_ps(-0.0), self.0)) }
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            unsafe {
+                let m = _mm256_set1_ps(-0.0);
+                Avx(_mm256_or_ps(_mm256_and_ps(s.0, m), _mm256_andnot_ps(m, self.0)))
+            }
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_max_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_LE_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_LT_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_GE_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_GT_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_and_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_or_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn andnot(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_andnot_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            unsafe { Avx(_mm256_blendv_ps(b.0, a.0, m.0)) }
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            unsafe { _mm256_movemask_ps(self.0) as u32 }
+        }
+    }
+}
+
+/// A kernel's answer in lanes: where the line meets the solid, and the range.
+#[derive(Clone, Copy)]
+struct R8<V> {
+    hit: V,
+    t0: V,
+    s0: V,
+    t1: V,
+    s1: V,
+}
+
+/// The all-true mask.
+#[inline(always)]
+fn all<V: V8>() -> V {
+    V::splat(f32::from_bits(u32::MAX))
+}
+
+/// Sub-surface ids travel as small floats (exact) so that selects move them.
+#[inline(always)]
+fn s<V: V8>(id: u32) -> V {
+    V::splat(id as f32)
+}
+
+#[inline(always)]
+fn dot<V: V8>(a: &[V; 3], b: &[V; 3]) -> V {
+    // `Vec3::dot`'s order: (x x' + y y') + z z'.
+    a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
+}
+
+/// `kernels::sphere`.
+#[inline(always)]
+fn sphere<V: V8>(o: &[V; 3], d: &[V; 3]) -> R8<V> {
+    let a = dot(d, d);
+    let b = dot(o, d);
+    let r = b.div(a);
+    let f = [o[0].sub(d[0].mul(r)), o[1].sub(d[1].mul(r)), o[2].sub(d[2].mul(r))];
+    let disc = a.mul(V::splat(1.0).sub(dot(&f, &f)));
+    let c = dot(o, o).sub(V::splat(1.0));
+    let hit = disc.ge(V::splat(0.0)).andnot_of(c.eq(V::splat(f32::INFINITY)));
+    let q = b.add(disc.sqrt().copysign(b)).neg();
+    let q0 = q.eq(V::splat(0.0));
+    let t0 = V::select(q0, V::splat(0.0), c.div(q));
+    let t1 = V::select(q0, V::splat(0.0), q.div(a));
+    let keep = t0.le(t1);
+    R8 { hit, t0: V::select(keep, t0, t1), s0: s(sub::SIDE), t1: V::select(keep, t1, t0), s1: s(sub::SIDE) }
+}
+
+trait MaskOps: Sized {
+    /// `self and not m`.
+    fn andnot_of(self, m: Self) -> Self;
+}
+
+impl<V: V8> MaskOps for V {
+    #[inline(always)]
+    fn andnot_of(self, m: Self) -> Self {
+        m.andnot(self)
+    }
+}
+
+/// `kernels::cuboid` on `[mn, mx]`.
+#[inline(always)]
+fn cuboid<V: V8>(o: &[V; 3], d: &[V; 3], mn: [f32; 3], mx: [f32; 3]) -> R8<V> {
+    let zero = V::splat(0.0);
+    let mut t_in = V::splat(f32::NEG_INFINITY);
+    let mut t_out = V::splat(f32::INFINITY);
+    let (mut s_in, mut s_out) = (zero, zero);
+    let mut miss = zero;
+    for a in 0..3 {
+        let flat = d[a].eq(zero);
+        let (lo, hi) = (V::splat(mn[a]), V::splat(mx[a]));
+        // A ray parallel to the slab misses when outside it, else skips the axis.
+        miss = miss.or(flat.and(o[a].lt(lo).or(o[a].gt(hi))));
+        let inv = V::splat(1.0).div(d[a]);
+        let ta = lo.sub(o[a]).mul(inv);
+        let tb = hi.sub(o[a]).mul(inv);
+        let ord = ta.le(tb);
+        let tn = V::select(ord, ta, tb);
+        let tf = V::select(ord, tb, ta);
+        let sn = V::select(ord, s(a as u32 * 2), s(a as u32 * 2 + 1));
+        let sf = V::select(ord, s(a as u32 * 2 + 1), s(a as u32 * 2));
+        let up_in = tn.gt(t_in).andnot_of(flat);
+        t_in = V::select(up_in, tn, t_in);
+        s_in = V::select(up_in, sn, s_in);
+        let up_out = tf.lt(t_out).andnot_of(flat);
+        t_out = V::select(up_out, tf, t_out);
+        s_out = V::select(up_out, sf, s_out);
+    }
+    R8 { hit: t_in.le(t_out).andnot_of(miss), t0: t_in, s0: s_in, t1: t_out, s1: s_out }
+}
+
+/// `kernels::slab01` and `kernels::and` folded into a range `r`.
+#[inline(always)]
+fn and_slab01<V: V8>(oz: V, dz: V, r: R8<V>) -> R8<V> {
+    let zero = V::splat(0.0);
+    let one = V::splat(1.0);
+    let flat = dz.eq(zero);
+    let ta = oz.neg().div(dz);
+    let tb = one.sub(oz).div(dz);
+    let ord = ta.le(tb);
+    let (inf, ninf) = (V::splat(f32::INFINITY), V::splat(f32::NEG_INFINITY));
+    let b0 = V::select(flat, ninf, V::select(ord, ta, tb));
+    let bs0 = V::select(flat, s(sub::CAP0), V::select(ord, s(sub::CAP0), s(sub::CAP1)));
+    let b1 = V::select(flat, inf, V::select(ord, tb, ta));
+    let bs1 = V::select(flat, s(sub::CAP1), V::select(ord, s(sub::CAP1), s(sub::CAP0)));
+    let inside = zero.le(oz).and(oz.le(one));
+    let slab_hit = V::select(flat, inside, all());
+    // `and(side, slab)`: the later entry (ties to the side), the earlier exit.
+    let e = r.t0.ge(b0);
+    let x = r.t1.le(b1);
+    let t0 = V::select(e, r.t0, b0);
+    let t1 = V::select(x, r.t1, b1);
+    R8 { hit: r.hit.and(slab_hit).and(t0.le(t1)), t0, s0: V::select(e, r.s0, bs0), t1, s1: V::select(x, r.s1, bs1) }
+}
+
+/// `kernels::cylinder`.
+#[inline(always)]
+fn cylinder<V: V8>(o: &[V; 3], d: &[V; 3]) -> R8<V> {
+    let zero = V::splat(0.0);
+    let one = V::splat(1.0);
+    let a = d[0].mul(d[0]).add(d[1].mul(d[1]));
+    let axial = a.eq(zero);
+    let rr = o[0].mul(o[0]).add(o[1].mul(o[1]));
+    let b = o[0].mul(d[0]).add(o[1].mul(d[1]));
+    let r = b.div(a);
+    let fx = o[0].sub(d[0].mul(r));
+    let fy = o[1].sub(d[1].mul(r));
+    let disc = a.mul(one.sub(fx.mul(fx).add(fy.mul(fy))));
+    let c = rr.sub(one);
+    let q = b.add(disc.sqrt().copysign(b)).neg();
+    let q0 = q.eq(zero);
+    let t0 = V::select(q0, zero, c.div(q));
+    let t1 = V::select(q0, zero, q.div(a));
+    let keep = t0.le(t1);
+    let side_hit = disc.ge(zero).andnot_of(c.eq(V::splat(f32::INFINITY)));
+    let axial_hit = rr.gt(one).andnot(all());
+    let side = R8 {
+        hit: V::select(axial, axial_hit, side_hit),
+        t0: V::select(axial, V::splat(f32::NEG_INFINITY), V::select(keep, t0, t1)),
+        s0: s(sub::SIDE),
+        t1: V::select(axial, V::splat(f32::INFINITY), V::select(keep, t1, t0)),
+        s1: s(sub::SIDE),
+    };
+    and_slab01(o[2], d[2], side)
+}
+
+/// `kernels::half_space` for `n . p <= w`.
+#[inline(always)]
+fn half_space<V: V8>(o: &[V; 3], d: &[V; 3], n: [f32; 3], w: f32) -> R8<V> {
+    let nv = [V::splat(n[0]), V::splat(n[1]), V::splat(n[2])];
+    let den = dot(&nv, d);
+    let num = V::splat(w).sub(dot(&nv, o));
+    let zero = V::splat(0.0);
+    let flat = den.eq(zero);
+    let t = num.div(den);
+    let up = den.gt(zero);
+    let (inf, ninf) = (V::splat(f32::INFINITY), V::splat(f32::NEG_INFINITY));
+    R8 {
+        hit: V::select(flat, num.ge(zero), all()),
+        t0: V::select(flat, ninf, V::select(up, ninf, t)),
+        s0: s(sub::SIDE),
+        t1: V::select(flat, inf, V::select(up, t, inf)),
+        s1: s(sub::SIDE),
+    }
+}
+
+impl LeafTable {
+    /// Does leaf `i` have a packet kernel ([`LeafTable::ranges8`])?
+    #[inline]
+    pub fn has_kernel8(&self, i: u32) -> bool {
+        matches!(self.kind[i as usize], LeafKind::Sphere | LeafKind::Cuboid | LeafKind::Cylinder | LeafKind::HalfSpace)
+    }
+
+    /// Per lane k of `lanes`, the unclipped range of leaf `i` (which must
+    /// have a packet kernel) along the world line of ray k of `rays`, into
+    /// `out`: what [`LeafTable::spans_in`] computes before clipping, bit for
+    /// bit, for the lanes it marks done.
+    #[inline]
+    pub fn ranges8(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx") {
+                // SAFETY: the CPU has AVX.
+                return unsafe { self.ranges8_avx(i, rays, lanes, out) };
+            }
+            self.ranges8_in::<sse::Sse>(i, rays, lanes, out)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            // No packet kernels here: every lane goes the scalar way.
+            let _ = (i, rays, lanes);
+            *out = Ranges8::default();
+        }
+    }
+
+    /// [`LeafTable::ranges8`] with the SSE2 baseline, for tests: the same answers.
+    #[doc(hidden)]
+    #[cfg(target_arch = "x86_64")]
+    pub fn ranges8_sse(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        self.ranges8_in::<sse::Sse>(i, rays, lanes, out)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn ranges8_avx(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        self.ranges8_in::<avx::Avx>(i, rays, lanes, out)
+    }
+
+    #[inline(always)]
+    fn ranges8_in<V: V8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        let iu = i as usize;
+        let m = &self.to_local[iu];
+        let anchor = self.anchor[iu];
+        let col = |v: Vec3A| [v.x, v.y, v.z];
+        let (mx, my, mz, tr) = (col(m.matrix3.x_axis), col(m.matrix3.y_axis), col(m.matrix3.z_axis), col(m.translation));
+        // `(Vec3A::from(o) - anchor)` per axis, then `transform_point3a`'s
+        // ((x_axis x + y_axis y) + z_axis z) + translation.
+        let rel = [
+            V::load(&rays.o[0]).sub(V::splat(anchor.x)),
+            V::load(&rays.o[1]).sub(V::splat(anchor.y)),
+            V::load(&rays.o[2]).sub(V::splat(anchor.z)),
+        ];
+        let wd = [V::load(&rays.d[0]), V::load(&rays.d[1]), V::load(&rays.d[2])];
+        let map = |v: &[V; 3], a: usize| V::splat(mx[a]).mul(v[0]).add(V::splat(my[a]).mul(v[1])).add(V::splat(mz[a]).mul(v[2]));
+        let lo: [V; 3] = std::array::from_fn(|a| map(&rel, a).add(V::splat(tr[a])));
+        let ld: [V; 3] = std::array::from_fn(|a| map(&wd, a));
+        // `Ray::dir_rescale(ld)` is `None`: the largest |component| in range.
+        let big = ld[0].abs().max(ld[1].abs()).max(ld[2].abs());
+        let in_range = V::splat(1.0 / DIR_SAFE_MAX).le(big).and(big.le(V::splat(DIR_SAFE_MAX)));
+        let (p0, p1) = (self.p0[iu], self.p1[iu]);
+        let r = match self.kind[iu] {
+            LeafKind::Sphere => sphere(&lo, &ld),
+            LeafKind::Cuboid => cuboid(&lo, &ld, [p0.x, p0.y, p0.z], [p1.x, p1.y, p1.z]),
+            LeafKind::Cylinder => cylinder(&lo, &ld),
+            LeafKind::HalfSpace => half_space(&lo, &ld, [p0.x, p0.y, p0.z], p0.w),
+            _ => unreachable!("no packet kernel for {:?}", self.kind[iu]),
+        };
+        let done = in_range.bitmask() & lanes;
+        *out =
+            Ranges8 { done, hit: r.hit.bitmask() & done, t0: r.t0.store(), s0: r.s0.store_u32(), t1: r.t1.store(), s1: r.s1.store_u32() };
+    }
+}
+
+#[cfg(test)]
+#[path = "kernels8_tests.rs"]
+mod tests;
