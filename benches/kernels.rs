@@ -11,6 +11,10 @@
 //!   mesh), baked from a JSON scene through `rothray::io`, on 1024 rays aimed
 //!   at the leaf's bounds from all sides (hits and misses; the hit fraction
 //!   is printed).
+//! * `leaf/KIND x8 packet` (and `... sse2`): the same rays eight at a time
+//!   through the packet kernel ([`LeafTable::ranges8`], AVX when the CPU has
+//!   it; SSE2 forced) for the kinds that have one (sphere, box, cylinder,
+//!   half-space); per ray as well.
 //! * `combine/OP/N`: [`combine`] of two lists of N spans each (1, 2, 4, 8),
 //!   for union, intersection and difference; per call, not per ray.
 //! * `wide_union/...`: a ground box and a union of 3000 small spheres (like
@@ -24,11 +28,9 @@
 //!   `closest_hit8` (the 4-wide BVH walked once per packet) on camera rays of
 //!   the bunny's view, tiles picked the same way.
 //!
-//! Not here, because it does not exist yet: a SIMD packet kernel for the
-//! analytic leaves (every analytic leaf is traced one ray at a time, also
-//! inside packets) and a SIMD interval merge (packets combine their span
-//! lists lane by lane with the scalar `combine`). The issue's "scalar
-//! against packet" comparison for those waits for them.
+//! Not here, because it does not exist yet: a SIMD interval merge (packets
+//! combine their span lists lane by lane with the scalar `combine`), and
+//! packet kernels for the cone, the torus, sweeps and generalized cylinders.
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -40,6 +42,7 @@ use rand::{rngs::SmallRng, Rng, SeedableRng};
 use rothray::csg::{combine, Op, SpanList};
 use rothray::engine::{tile_size, Camera, CameraRays, PacketScratch, Ray, RenderScene, TileScratch};
 use rothray::primitives::frustum::Frustum;
+use rothray::primitives::kernels8::{Ranges8, Rays8Soa};
 use rothray::primitives::mesh::{InsideRule, MeshData};
 use rothray::primitives::{Aabb, LeafKind, Span, Surf};
 
@@ -154,6 +157,36 @@ fn leaf_kernels(c: &mut Criterion) {
                     out.clear();
                     leaves.spans(i, black_box(r), &mut out);
                     n += out.len();
+                }
+                n
+            })
+        });
+        if !leaves.has_kernel8(i) {
+            continue;
+        }
+        // The same rays eight at a time through the packet kernel (its
+        // unclipped ranges; the scalar figure above includes the clipping).
+        let packets: Vec<Rays8Soa> = rays
+            .chunks_exact(8)
+            .map(|c| Rays8Soa::new(&std::array::from_fn(|k| c[k].origin), &std::array::from_fn(|k| c[k].dir)))
+            .collect();
+        let mut r8 = Ranges8::default();
+        g.bench_function(format!("{name} x8 packet"), |bch| {
+            bch.iter(|| {
+                let mut n = 0u32;
+                for p in &packets {
+                    leaves.ranges8(i, black_box(p), 0xff, &mut r8);
+                    n += r8.hit.count_ones();
+                }
+                n
+            })
+        });
+        g.bench_function(format!("{name} x8 packet sse2"), |bch| {
+            bch.iter(|| {
+                let mut n = 0u32;
+                for p in &packets {
+                    leaves.ranges8_sse(i, black_box(p), 0xff, &mut r8);
+                    n += r8.hit.count_ones();
                 }
                 n
             })

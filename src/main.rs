@@ -563,6 +563,9 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "early_outs": st.eval.early_outs,
         "packet_union_lanes": st.eval.packet_lanes,
         "packet_union_misses": st.eval.packet_misses,
+        "packet_leaf_solves": st.eval.leaf_solves,
+        "packet_leaf_lanes": st.eval.leaf_lanes,
+        "packet_leaf_scalar_lanes": st.eval.leaf_scalar,
     })
 }
 

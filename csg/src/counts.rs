@@ -11,6 +11,9 @@ thread_local! {
     static EARLY: Cell<u64> = const { Cell::new(0) };
     static PACKET_SERVED: Cell<u64> = const { Cell::new(0) };
     static PACKET_MISSED: Cell<u64> = const { Cell::new(0) };
+    static LEAF_SOLVES: Cell<u64> = const { Cell::new(0) };
+    static LEAF_SERVED: Cell<u64> = const { Cell::new(0) };
+    static LEAF_SCALAR: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -29,6 +32,14 @@ pub struct EvalCounts {
     /// Wide-union evaluations of a packet lane that its packet's record did
     /// not answer (another range: the lane walked on its own).
     pub packet_misses: u64,
+    /// Analytic leaves solved for all lanes of a packet at once
+    /// ([`crate::PacketMemo::solve_leaves_for`]).
+    pub leaf_solves: u64,
+    /// Leaf queries of packet lanes answered from those solves.
+    pub leaf_lanes: u64,
+    /// Leaf queries of packet lanes that a solve left to the scalar kernel
+    /// (a local direction out of the kernels' range).
+    pub leaf_scalar: u64,
 }
 
 impl EvalCounts {
@@ -39,6 +50,9 @@ impl EvalCounts {
         self.early_outs += o.early_outs;
         self.packet_lanes += o.packet_lanes;
         self.packet_misses += o.packet_misses;
+        self.leaf_solves += o.leaf_solves;
+        self.leaf_lanes += o.leaf_lanes;
+        self.leaf_scalar += o.leaf_scalar;
     }
 }
 
@@ -67,6 +81,16 @@ pub(crate) fn packet_lane(served: bool) {
     bump(if served { &PACKET_SERVED } else { &PACKET_MISSED });
 }
 
+#[inline(always)]
+pub(crate) fn leaf_solve() {
+    bump(&LEAF_SOLVES);
+}
+
+#[inline(always)]
+pub(crate) fn leaf_lane(served: bool) {
+    bump(if served { &LEAF_SERVED } else { &LEAF_SCALAR });
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -75,5 +99,8 @@ pub fn take_eval_counts() -> EvalCounts {
         early_outs: EARLY.with(|c| c.replace(0)),
         packet_lanes: PACKET_SERVED.with(|c| c.replace(0)),
         packet_misses: PACKET_MISSED.with(|c| c.replace(0)),
+        leaf_solves: LEAF_SOLVES.with(|c| c.replace(0)),
+        leaf_lanes: LEAF_SERVED.with(|c| c.replace(0)),
+        leaf_scalar: LEAF_SCALAR.with(|c| c.replace(0)),
     }
 }

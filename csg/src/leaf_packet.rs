@@ -17,6 +17,7 @@ use rothray_primitives::{
 };
 
 use super::PacketMemo;
+use crate::counts;
 
 /// Cached leaves per packet (a direct-mapped table by leaf index: a
 /// collision only costs a second solve).
@@ -75,11 +76,14 @@ impl PacketMemo {
         }
         let e = &mut r.slots[i as usize % SLOTS];
         if e.0 != i || e.1 != r.generation {
+            counts::leaf_solve();
             leaves.ranges8(i, &r.rays, r.lanes, &mut e.2);
             (e.0, e.1) = (i, r.generation);
         }
         let e = &e.2;
-        if e.done & (1 << k) == 0 {
+        let done = e.done & (1 << k) != 0;
+        counts::leaf_lane(done);
+        if !done {
             return None;
         }
         if e.hit & (1 << k) != 0 {
