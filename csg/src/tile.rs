@@ -63,6 +63,9 @@ pub struct TileProgram {
     planes: Vec<Plane>,
     /// Counts since the last [`TileProgram::take_counts`].
     counts: TileCounts,
+    /// Has a leaf with a packet kernel been kept since [`TileProgram::begin`]
+    /// (or a node kept whole, whose leaves were not looked at)?
+    pub kernels8: bool,
 }
 
 impl TileProgram {
@@ -84,6 +87,7 @@ impl TileProgram {
         p.leafy.truncate(n);
         p.children.truncate(self.base_children);
         p.local_len = 0;
+        self.kernels8 = false;
     }
 
     /// The counts so far, reset.
@@ -129,9 +133,11 @@ impl Spec<'_> {
         }
         if kind == NodeKind::Leaf {
             self.tp.counts.leaves_kept += 1;
+            self.tp.kernels8 |= self.leaves.has_kernel8(b.first[nu]);
             return Some(n);
         }
         if depth >= MAX_DEPTH {
+            self.tp.kernels8 = true;
             return Some(n);
         }
         let (first, count) = (b.first[nu] as usize, b.count[nu] as usize);
@@ -180,6 +186,8 @@ impl Spec<'_> {
         let nu = n as usize;
         let w = &b.wides[b.wide[nu] as usize];
         self.tp.counts.wide_queries += 1;
+        // (Its children are not looked at one by one.)
+        self.tp.kernels8 = true;
         let kind = b.kind[nu];
         let skip = (kind == NodeKind::Difference) as u32;
         let first = b.first[nu] as usize;

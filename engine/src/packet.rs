@@ -308,7 +308,8 @@ impl RenderScene {
         let unions = tile.is_some_and(|t| t.unions);
         if !meshes {
             let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
-            if n == 8 && rays.iter().all(plain) {
+            // (A tile without packet kernels or wide unions has nothing to share.)
+            if n == 8 && tile.is_none_or(|t| t.kernels8 || t.unions) && rays.iter().all(plain) {
                 self.lane_packet(rays, ps, out, normals, tile);
                 return;
             }
@@ -387,7 +388,9 @@ impl RenderScene {
             ps.memo.walk_unions_for(&plain, left);
         }
         // Its analytic leaves, solved for all lanes when the first asks.
-        ps.memo.solve_leaves_for(&[o; 8], &d, left);
+        if tile.is_none_or(|t| t.kernels8) {
+            ps.memo.solve_leaves_for(&[o; 8], &d, left);
+        }
         // All eight contexts are written before the first is read: reading one
         // just built (its fields written piecewise, read with wider loads) stalls
         // on store forwarding.
@@ -424,7 +427,9 @@ impl RenderScene {
         if tile.is_some_and(|t| t.unions) {
             ps.memo.walk_unions_for(&plain, 0xff);
         }
-        ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
+        if tile.is_none_or(|t| t.kernels8) {
+            ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
+        }
         let memo = &ps.memo;
         for k in 0..8 {
             let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
@@ -441,13 +446,15 @@ impl RenderScene {
         let n = rays.len().min(out.len());
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
         match tile {
-            _ if n == 8 && rays.iter().all(plain) => {
+            _ if n == 8 && tile.is_none_or(|t| t.kernels8 || t.unions) && rays.iter().all(plain) => {
                 let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
                 ps.memo.clear();
                 if tile.is_some_and(|t| t.unions) {
                     ps.memo.walk_unions_for(&ctx, 0xff);
                 }
-                ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
+                if tile.is_none_or(|t| t.kernels8) {
+                    ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
+                }
                 let memo = &ps.memo;
                 for k in 0..8 {
                     out[k] = self.occluded_ctx(&RayCtx { memo: Some((memo, k)), ..ctx[k] }, &mut ps.scratch, tile);

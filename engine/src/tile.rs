@@ -77,6 +77,8 @@ pub struct TileView<'a> {
     pub(crate) bounded: Option<&'a BoxList>,
     /// Has the tile objects that packets walk together (see `TileScratch`)?
     pub(crate) unions: bool,
+    /// Has the tile leaves with packet kernels (`LeafTable::ranges8`)?
+    pub(crate) kernels8: bool,
 }
 
 impl TileView<'_> {
@@ -98,7 +100,13 @@ impl TileView<'_> {
 impl TileScratch {
     /// The view of the tile last prepared.
     pub fn view(&self) -> TileView<'_> {
-        TileView { prog: &self.tp.prog, root_of: &self.root_of, bounded: self.listed.then_some(&self.boxes), unions: self.unions }
+        TileView {
+            prog: &self.tp.prog,
+            root_of: &self.root_of,
+            bounded: self.listed.then_some(&self.boxes),
+            unions: self.unions,
+            kernels8: self.tp.kernels8,
+        }
     }
 
     /// The counts so far, reset.
