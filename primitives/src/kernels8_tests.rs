@@ -113,3 +113,64 @@ fn packet_kernels_match_the_scalar_kernels_bit_for_bit() {
     println!("{lanes_done} lanes compared, {lanes_hit} meeting their leaf");
     assert!(lanes_hit > 3000 && lanes_done > 10000);
 }
+
+/// The same comparison on adversarial rays: coordinates and direction
+/// components drawn from signed zeros, the canonical faces (0, ±1, ±0.5),
+/// tiny and huge values, so that lanes start on faces, run inside them,
+/// divide by zero and overflow; leaves with and without a map.
+#[test]
+fn packet_kernels_match_the_scalar_kernels_on_edge_cases() {
+    let seed = 0x0ed6e5u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut t = LeafTable::default();
+    let id = DAffine3::IDENTITY;
+    t.push(&LeafShape::Sphere(Sphere { center: Vec3::ZERO, radius: 1.0 }), &id).unwrap();
+    t.push(&LeafShape::Cuboid(Cuboid { min: Vec3::splat(-0.5), max: Vec3::splat(0.5) }), &id).unwrap();
+    t.push(&LeafShape::Cylinder(Cylinder { a: Vec3::ZERO, b: Vec3::Z, radius: 1.0 }), &id).unwrap();
+    t.push(&LeafShape::HalfSpace(HalfSpace { normal: Vec3::Y, offset: 0.5 }), &id).unwrap();
+    t.push(&LeafShape::Sphere(Sphere { center: Vec3::new(1e3, 0.0, 0.0), radius: 1e-3 }), &id).unwrap();
+    let vals = [0.0f32, -0.0, 1.0, -1.0, 0.5, -0.5, 1e-30, -1e-30, 1e30, -1e30, 2.0, 1e3, 1e-3, f32::MIN_POSITIVE];
+    let pick = |rng: &mut SmallRng| vals[rng.gen_range(0..vals.len())];
+    let (mut compared, mut hits) = (0u64, 0u64);
+    for round in 0..20000 {
+        let i = rng.gen_range(0..t.len() as u32);
+        let o: [Vec3; 8] = std::array::from_fn(|_| Vec3::new(pick(&mut rng), pick(&mut rng), pick(&mut rng)));
+        let d: [Vec3; 8] = std::array::from_fn(|_| loop {
+            let v = Vec3::new(pick(&mut rng), pick(&mut rng), pick(&mut rng));
+            if v != Vec3::ZERO {
+                break v;
+            }
+        });
+        let rays = Rays8Soa::new(&o, &d);
+        let mut r = Ranges8::default();
+        t.ranges8(i, &rays, 0xff, &mut r);
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut s = Ranges8::default();
+            t.ranges8_sse(i, &rays, 0xff, &mut s);
+            assert_eq!((r.done, r.hit), (s.done, s.hit), "leaf {i} round {round}");
+        }
+        for k in 0..8 {
+            let ray = Ray::new(o[k], d[k]);
+            let ld = t.to_local[i as usize].transform_vector3(d[k]);
+            assert_eq!(r.done & (1 << k) != 0, Ray::dir_rescale(ld).is_none(), "leaf {i} lane {k} round {round}: done");
+            if r.done & (1 << k) == 0 {
+                continue;
+            }
+            compared += 1;
+            let mut want: Vec<Span> = Vec::new();
+            t.spans_in(i, &ray, (f32::NEG_INFINITY, f32::INFINITY), &mut want);
+            let mut got: Vec<Span> = Vec::new();
+            if r.hit & (1 << k) != 0 {
+                hits += 1;
+                let sp = Span { t0: r.t0[k], s0: Surf::new(i, r.s0[k]), t1: r.t1[k], s1: Surf::new(i, r.s1[k]) };
+                push_clipped(&mut got, sp, f32::NEG_INFINITY, f32::INFINITY);
+            }
+            let bits = |s: &Vec<Span>| s.iter().map(|x| (x.t0.to_bits(), x.s0, x.t1.to_bits(), x.s1)).collect::<Vec<_>>();
+            assert_eq!(bits(&got), bits(&want), "leaf {i} ({:?}) lane {k} round {round}: o {:?} d {:?}", t.kind[i as usize], o[k], d[k]);
+        }
+    }
+    println!("{compared} lanes compared, {hits} meeting their leaf");
+    assert!(compared > 50_000 && hits > 10_000);
+}
