@@ -10,6 +10,7 @@ use rothray_primitives::{
     bvh::FlatBvh,
     polytope::{polytope_box, Plane},
     table::push_clipped,
+    wide_node::WideTrees,
     Aabb, LeafKind, LeafTable, Ray, Span, SpanSink, Surf,
 };
 
@@ -50,12 +51,10 @@ pub struct Wide {
     pub bvh: FlatBvh,
     /// Positions of children with unbounded boxes (always visited).
     pub unbounded: Vec<u32>,
-    /// A binary tree over the same boxes for region queries (tiles ask it
+    /// A 4-wide tree over the same boxes, for packets of eight rays
+    /// ([`PacketMemo::walk_unions_for`]) and region queries (tiles ask it
     /// which children their rays can meet; the `CwBvh` of `bvh` has no such
-    /// query).
-    pub cull: FlatBvh,
-    /// `cull` collapsed to four children per node, for packets of eight
-    /// rays ([`PacketMemo::walk_unions_for`]); empty in a tile's own wide nodes.
+    /// query); empty in a tile's own wide nodes.
     pub packet: BoxWide,
 }
 
@@ -430,19 +429,9 @@ impl<'a> ProgramBuilder<'a> {
                     unbounded.push(pos as u32);
                 }
             }
-            let mut bvh = FlatBvh::build(&boxes, 2);
-            for x in bvh.prims.iter_mut() {
-                *x = ids[*x as usize];
-            }
-            let mut cull = FlatBvh::build_cull(&boxes, 4);
-            for x in cull.prims.iter_mut() {
-                *x = ids[*x as usize];
-            }
+            let WideTrees { rays: bvh, packet } = WideTrees::build(&boxes, &ids);
             wide = p.wides.len() as u32;
-            // The region tree collapsed for packets (a tree of obvhs' medium
-            // quality instead cost scenes/forest 6% more instructions).
-            let packet = BoxWide::from_binary(&cull.nodes, &cull.prims);
-            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, cull, packet });
+            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, packet });
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);
