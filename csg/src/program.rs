@@ -414,7 +414,8 @@ impl<'a> ProgramBuilder<'a> {
         let skip = if kind == NodeKind::Difference { 1 } else { 0 };
         let mut wide = u32::MAX;
         if kind != NodeKind::Intersection && flat.len() - skip > WIDE_THRESHOLD {
-            let mut boxes = Vec::new();
+            // The bounded children's positions (their boxes are read where
+            // they are: see `WideTrees::build`).
             let mut ids = Vec::new();
             let mut unbounded = Vec::new();
             for (pos, &c) in flat.iter().enumerate().skip(skip) {
@@ -423,13 +424,15 @@ impl<'a> ProgramBuilder<'a> {
                     continue; // contributes nothing
                 }
                 if b.is_finite() {
-                    boxes.push(b);
                     ids.push(pos as u32);
                 } else {
                     unbounded.push(pos as u32);
                 }
             }
-            let WideTrees { rays: bvh, packet } = WideTrees::build(&boxes, &ids);
+            let (bounds, children) = (&p.bounds, &flat);
+            let WideTrees { rays: bvh, packet } =
+                WideTrees::build(ids.len(), |i| bounds[children[ids[i as usize] as usize] as usize], |i| ids[i as usize]);
+            drop(ids);
             wide = p.wides.len() as u32;
             Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, packet });
         }
