@@ -10,6 +10,7 @@ use rothray_primitives::{
     bvh::FlatBvh,
     polytope::{polytope_box, Plane},
     table::push_clipped,
+    wide_node::WideTrees,
     Aabb, LeafKind, LeafTable, Ray, Span, SpanSink, Surf,
 };
 
@@ -50,12 +51,10 @@ pub struct Wide {
     pub bvh: FlatBvh,
     /// Positions of children with unbounded boxes (always visited).
     pub unbounded: Vec<u32>,
-    /// A binary tree over the same boxes for region queries (tiles ask it
+    /// A 4-wide tree over the same boxes, for packets of eight rays
+    /// ([`PacketMemo::walk_unions_for`]) and region queries (tiles ask it
     /// which children their rays can meet; the `CwBvh` of `bvh` has no such
-    /// query).
-    pub cull: FlatBvh,
-    /// `cull` collapsed to four children per node, for packets of eight
-    /// rays ([`PacketMemo::walk_unions_for`]); empty in a tile's own wide nodes.
+    /// query); empty in a tile's own wide nodes.
     pub packet: BoxWide,
 }
 
@@ -425,7 +424,8 @@ impl<'a> ProgramBuilder<'a> {
         let skip = if kind == NodeKind::Difference { 1 } else { 0 };
         let mut wide = u32::MAX;
         if kind != NodeKind::Intersection && flat.len() - skip > WIDE_THRESHOLD {
-            let mut boxes = Vec::new();
+            // The bounded children's positions (their boxes are read where
+            // they are: see `WideTrees::build`).
             let mut ids = Vec::new();
             let mut unbounded = Vec::new();
             for (pos, &c) in flat.iter().enumerate().skip(skip) {
@@ -434,25 +434,17 @@ impl<'a> ProgramBuilder<'a> {
                     continue; // contributes nothing
                 }
                 if b.is_finite() {
-                    boxes.push(b);
                     ids.push(pos as u32);
                 } else {
                     unbounded.push(pos as u32);
                 }
             }
-            let mut bvh = FlatBvh::build(&boxes, 2);
-            for x in bvh.prims.iter_mut() {
-                *x = ids[*x as usize];
-            }
-            let mut cull = FlatBvh::build_cull(&boxes, 4);
-            for x in cull.prims.iter_mut() {
-                *x = ids[*x as usize];
-            }
+            let (bounds, children) = (&p.bounds, &flat);
+            let WideTrees { rays: bvh, packet } =
+                WideTrees::build(ids.len(), |i| bounds[children[ids[i as usize] as usize] as usize], |i| ids[i as usize]);
+            drop(ids);
             wide = p.wides.len() as u32;
-            // The region tree collapsed for packets (a tree of obvhs' medium
-            // quality instead cost scenes/forest 6% more instructions).
-            let packet = BoxWide::from_binary(&cull.nodes, &cull.prims);
-            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, cull, packet });
+            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, packet });
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);

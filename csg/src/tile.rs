@@ -206,7 +206,7 @@ impl Spec<'_> {
             let kids = std::cell::RefCell::new(&mut self.tp.kids);
             let most = if kind == NodeKind::Difference { SHORT_LIST } else { NARROW_UNION };
             let limit = at + most + 1;
-            w.cull.cull(
+            w.packet.cull(
                 |bx| kids.borrow().len() < limit && region.touches_box(bx),
                 |pos| {
                     let mut k = kids.borrow_mut();

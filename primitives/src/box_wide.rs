@@ -86,6 +86,88 @@ impl BoxWide {
         w
     }
 
+    /// The tree over the trees `parts` (their payload ids already final):
+    /// the binary tree `top` (leaves of one primitive each, the index of a
+    /// part) collapsed, its leaves replaced by the parts' roots, the parts'
+    /// nodes, leaves and ids appended.
+    pub fn from_parts(top: &[BvhNode], top_prims: &[u32], parts: Vec<BoxWide>) -> BoxWide {
+        let mut w = BoxWide { nodes: collapse(top, |n| LEAF | top_prims[n.first as usize]), ..BoxWide::default() };
+        // Where each part's root lands.
+        let mut root = Vec::with_capacity(parts.len());
+        let mut at = w.nodes.len() as u32;
+        for p in &parts {
+            root.push(at);
+            at += p.nodes.len() as u32;
+        }
+        for n in w.nodes.iter_mut() {
+            for s in 0..4 {
+                if n.slot_box(s).is_some() {
+                    n.set_child(s, root[(n.child(s as u32) & !LEAF) as usize]);
+                }
+            }
+        }
+        for p in parts {
+            let (node0, leaf0, id0) = (w.nodes.len() as u32, w.leaves.len() as u32, w.ids.len() as u32);
+            for mut n in p.nodes {
+                for s in 0..4 {
+                    if n.slot_box(s).is_some() {
+                        let c = n.child(s as u32);
+                        n.set_child(s, if c & LEAF != 0 { LEAF | ((c & !LEAF) + leaf0) } else { c + node0 });
+                    }
+                }
+                w.nodes.push(n);
+            }
+            w.leaves.extend(p.leaves.iter().map(|&(f, c)| (f + id0, c)));
+            w.ids.extend_from_slice(&p.ids);
+        }
+        w
+    }
+
+    /// Frees the room the build left over.
+    pub fn shrink_to_fit(&mut self) {
+        self.nodes.shrink_to_fit();
+        self.leaves.shrink_to_fit();
+        self.ids.shrink_to_fit();
+    }
+
+    /// Visits the payload of every leaf whose box, and every ancestor's
+    /// box, passes `test` (a superset of the payloads whose own box passes:
+    /// callers test those themselves); a region query.
+    pub fn cull(&self, mut test: impl FnMut(&Aabb) -> bool, mut f: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
+        stack.push(0);
+        while let Some(ni) = stack.pop() {
+            let n = &self.nodes[ni as usize];
+            for s in 0..4 {
+                let Some(b) = n.slot_box(s) else { continue };
+                if !test(&b) {
+                    continue;
+                }
+                let c = n.child(s as u32);
+                if c & LEAF != 0 {
+                    let (first, count) = self.leaves[(c & !LEAF) as usize];
+                    for &id in &self.ids[first as usize..(first + count) as usize] {
+                        f(id);
+                    }
+                } else {
+                    stack.push(c);
+                }
+            }
+        }
+    }
+
+    /// Heap bytes held (capacity of the node, leaf and id arrays).
+    pub fn heap_bytes(&self) -> [usize; 3] {
+        [
+            self.nodes.capacity() * std::mem::size_of::<Node4>(),
+            self.leaves.capacity() * std::mem::size_of::<(u32, u32)>(),
+            self.ids.capacity() * 4,
+        ]
+    }
+
     /// Is the tree empty?
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()

@@ -39,17 +39,34 @@ pub struct BvhNode {
 pub struct FlatBvh {
     /// Nodes, root first.
     pub nodes: Vec<BvhNode>,
-    /// Primitive ids referenced by the leaves.
+    /// Primitive ids referenced by the leaves (a `CwBvh` holds them in its
+    /// `primitive_indices` instead: one copy, 4 bytes per box).
     pub prims: Vec<u32>,
     /// The wide BVH (None for a single-leaf set).
     pub cw: Option<CwBvh>,
-    /// The input boxes (kept with a `CwBvh`, which has no point query).
+    /// The input boxes (kept with a `CwBvh`, which has no point query;
+    /// empty in a tree for rays only, [`FlatBvh::build_for_rays`]).
     pub boxes: Vec<Aabb>,
+    /// A tree over parts ([`FlatBvh::over_parts`]): `cw`'s primitives are
+    /// indices into this list, whose trees hold the primitives.
+    pub parts: Vec<FlatBvh>,
 }
 
 impl FlatBvh {
     /// Builds over `boxes` (all must be finite and non-empty). `max_leaf` primitives per leaf at most.
     pub fn build(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
+        let mut t = Self::build_for_rays(boxes, max_leaf);
+        if t.cw.is_some() {
+            t.boxes = boxes.to_vec();
+        }
+        t
+    }
+
+    /// [`FlatBvh::build`] for ray walks only: the boxes are not kept (24
+    /// bytes per box), so [`FlatBvh::cull`] and [`FlatBvh::point_query`]
+    /// find nothing in the `CwBvh` (a wide CSG node's children, whose region
+    /// queries go to its [`crate::box_wide::BoxWide`]).
+    pub fn build_for_rays(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
         if boxes.is_empty() {
             return FlatBvh::default();
         }
@@ -61,8 +78,7 @@ impl FlatBvh {
             return FlatBvh {
                 nodes: vec![BvhNode { min: b.min, first: 0, max: b.max, count: boxes.len() as u32 }],
                 prims: (0..boxes.len() as u32).collect(),
-                cw: None,
-                boxes: Vec::new(),
+                ..FlatBvh::default()
             };
         }
         let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
@@ -73,13 +89,38 @@ impl FlatBvh {
         let mut params = BvhBuildParams::very_slow_build();
         params.max_prims_per_leaf = max_leaf.clamp(1, 3);
         let mut t = std::time::Duration::ZERO;
-        let cw = build_cwbvh(&oboxes, params, &mut t);
+        let mut cw = build_cwbvh(&oboxes, params, &mut t);
+        // obvhs leaves room for a node per box: 80 bytes per box, of which a
+        // union of 10^6 spheres used 11.
+        cw.nodes.shrink_to_fit();
         let b = cw.total_aabb;
-        FlatBvh {
-            nodes: vec![BvhNode { min: b.min.into(), first: 0, max: b.max.into(), count: 0 }],
-            prims: cw.primitive_indices.clone(),
-            cw: Some(cw),
-            boxes: boxes.to_vec(),
+        FlatBvh { nodes: vec![BvhNode { min: b.min.into(), first: 0, max: b.max.into(), count: 0 }], cw: Some(cw), ..FlatBvh::default() }
+    }
+
+    /// A tree for rays over the trees `parts` (each built for rays, its
+    /// primitive ids already final), whose bounds are `bounds`.
+    pub fn over_parts(bounds: &[Aabb], parts: Vec<FlatBvh>) -> FlatBvh {
+        let mut top = Self::build_for_rays(bounds, 1);
+        if top.cw.is_none() {
+            // One part (or none): it is the tree.
+            return parts.into_iter().next().unwrap_or_default();
+        }
+        top.parts = parts;
+        top
+    }
+
+    /// Replaces every primitive id `p` by `f(p)`.
+    pub fn map_prims(&mut self, f: &impl Fn(u32) -> u32) {
+        if !self.parts.is_empty() {
+            self.parts.iter_mut().for_each(|p| p.map_prims(f));
+            return;
+        }
+        let ids = match &mut self.cw {
+            Some(cw) => &mut cw.primitive_indices,
+            None => &mut self.prims,
+        };
+        for x in ids.iter_mut() {
+            *x = f(*x);
         }
     }
 
@@ -105,7 +146,8 @@ impl FlatBvh {
         let oboxes: Vec<OAabb> = boxes.iter().map(|b| OAabb::new(b.min.into(), b.max.into())).collect();
         params.max_prims_per_leaf = max_leaf.max(1);
         let mut t = std::time::Duration::ZERO;
-        let b2 = build_bvh2(&oboxes, params, &mut t);
+        let mut b2 = build_bvh2(&oboxes, params, &mut t);
+        drop(oboxes);
         let nodes = b2
             .nodes
             .iter()
@@ -114,7 +156,7 @@ impl FlatBvh {
                 BvhNode { min: a.min.into(), first: n.first_index, max: a.max.into(), count: n.prim_count }
             })
             .collect();
-        FlatBvh { nodes, prims: b2.primitive_indices.clone(), cw: None, boxes: Vec::new() }
+        FlatBvh { nodes, prims: std::mem::take(&mut b2.primitive_indices), ..FlatBvh::default() }
     }
 
     /// Root box (empty for an empty BVH).
@@ -147,7 +189,33 @@ impl FlatBvh {
             let to_w = |t: f32| if t.is_finite() { t * dl + BACK_OFF } else { t };
             let ray = ORay::new((o - dn * BACK_OFF).into(), dn.into(), to_w(tmin), to_w(tmax));
             let mut hit = RayHit::none();
-            let prims = &self.prims;
+            let prims = &cw.primitive_indices;
+            if !self.parts.is_empty() {
+                // Each part met is walked with the range left so far (parts
+                // hold more than two boxes each: each has its `CwBvh`).
+                let mut cur = tmax;
+                cw.ray_traverse(ray, &mut hit, |_, slot| {
+                    let Some(pcw) = &self.parts[prims[slot] as usize].cw else { return to_w(cur) };
+                    let pprims = &pcw.primitive_indices;
+                    let mut stop = false;
+                    let mut phit = RayHit::none();
+                    let pray = ORay::new((o - dn * BACK_OFF).into(), dn.into(), to_w(tmin), to_w(cur));
+                    pcw.ray_traverse(pray, &mut phit, |_, s| {
+                        let nt = f(pprims[s], tmin);
+                        if nt < tmin {
+                            stop = true;
+                            return f32::NEG_INFINITY;
+                        }
+                        cur = nt;
+                        to_w(nt)
+                    });
+                    if stop {
+                        return f32::NEG_INFINITY;
+                    }
+                    to_w(cur)
+                });
+                return;
+            }
             cw.ray_traverse(ray, &mut hit, |_, slot| {
                 let nt = f(prims[slot], tmin);
                 if nt < tmin {

@@ -26,6 +26,20 @@ pub(crate) struct Node4 {
     child: [u32; 4],
 }
 
+impl Node4 {
+    /// The box of slot `s`, `None` for an empty slot.
+    #[inline]
+    pub(crate) fn slot_box(&self, s: usize) -> Option<crate::aabb::Aabb> {
+        let b = &self.b;
+        (b[0][s] <= b[1][s]).then(|| crate::aabb::Aabb::new(Vec3::new(b[0][s], b[2][s], b[4][s]), Vec3::new(b[1][s], b[3][s], b[5][s])))
+    }
+
+    /// Sets the child code of slot `s`.
+    pub(crate) fn set_child(&mut self, s: usize, code: u32) {
+        self.child[s] = code;
+    }
+}
+
 /// Up to four triangles of one leaf, SoA: `v[corner * 3 + axis]`, lanes past
 /// `count` are NaN (never hit, never take the scalar fallback).
 #[derive(Clone, Copy, Debug)]
