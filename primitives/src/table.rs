@@ -94,8 +94,14 @@ pub enum LeafShape {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum LeafKind {
-    /// Unit sphere.
+    /// Ball, traced in world space in f64 ([`kernels::ball`]): a sphere
+    /// whose transforms are similarities (rotation, uniform scale,
+    /// translation). Centre `anchor + p1.xyz`, radius `p0.x + p0.y` (f32 and
+    /// its f64 residual).
     Sphere,
+    /// Unit sphere under a map that is not a similarity (an ellipsoid in the
+    /// world), traced in local space ([`kernels::sphere`]).
+    Ellipsoid,
     /// Box `[p0, p1]`.
     Cuboid,
     /// Unit capped cylinder.
@@ -285,6 +291,17 @@ impl LeafShape {
     }
 }
 
+/// The scale of `m` when it is a similarity (orthogonal columns of one
+/// length, to 1e-10: 1e-3 of f32's resolution), else `None`.
+fn similarity_scale(m: &DMat3) -> Option<f64> {
+    let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
+    let l = (x.length() + y.length() + z.length()) / 3.0;
+    let tol = 1e-10 * l;
+    let same = [x, y, z].iter().all(|c| (c.length() - l).abs() <= tol);
+    let square = [x.dot(y), y.dot(z), z.dot(x)].iter().all(|d| d.abs() <= tol * l);
+    (same && square && l.is_finite()).then_some(l)
+}
+
 fn axis_frame(a: Vec3, b: Vec3, r: f64) -> DAffine3 {
     let a = a.as_dvec3();
     let ax = b.as_dvec3() - a;
@@ -305,7 +322,7 @@ pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
     let t = m.translation;
     let to = |lo: DVec3, hi: DVec3| Aabb::new(lo.as_vec3(), hi.as_vec3());
     match c.kind {
-        LeafKind::Sphere => {
+        LeafKind::Sphere | LeafKind::Ellipsoid => {
             let e = DVec3::new(a.row(0).length(), a.row(1).length(), a.row(2).length());
             to(t - e, t + e)
         }
@@ -546,12 +563,23 @@ impl LeafTable {
         // parameters, in f64 (a box 1e5 from the origin keeps bounds relative to
         // its centre, a plane its offset relative to the anchor); the map is
         // then linear.
-        let (inv32, p0, p1) = match c.kind {
+        let (kind, (inv32, p0, p1)) = match c.kind {
+            LeafKind::Sphere => match similarity_scale(&m.matrix3) {
+                // The ball's centre and radius in f64, kept as f32 numbers
+                // and residuals (see `LeafKind::Sphere`): with no transform
+                // both are the description's own f32 numbers, exactly.
+                Some(r) => {
+                    let e = (m.translation - anchor.as_dvec3()).as_vec3();
+                    let r32 = r as f32;
+                    (LeafKind::Sphere, (inv32, Vec4::new(r32, (r - r32 as f64) as f32, 0.0, 0.0), e.extend(0.0)))
+                }
+                None => (LeafKind::Ellipsoid, (inv32, c.p0, c.p1)),
+            },
             LeafKind::Cuboid => {
                 let lo = c.p0.truncate().as_dvec3() - b;
                 let hi = c.p1.truncate().as_dvec3() - b;
                 let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
-                (z, lo.as_vec3().extend(0.0), hi.as_vec3().extend(0.0))
+                (c.kind, (z, lo.as_vec3().extend(0.0), hi.as_vec3().extend(0.0)))
             }
             LeafKind::HalfSpace => {
                 // From the description's f32 numbers in f64: the canonical
@@ -561,12 +589,12 @@ impl LeafTable {
                 let n = h.normal.as_dvec3();
                 let w = (h.offset as f64 - n.dot(b)) / n.length();
                 let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
-                (z, c.p0.truncate().extend(w as f32), c.p1)
+                (c.kind, (z, c.p0.truncate().extend(w as f32), c.p1))
             }
-            _ => (inv32, c.p0, c.p1),
+            _ => (c.kind, (inv32, c.p0, c.p1)),
         };
         let i = self.kind.len() as u32;
-        self.kind.push(c.kind);
+        self.kind.push(kind);
         self.to_local.push(inv32);
         self.anchor.push(anchor.into());
         self.p0.push(p0);
@@ -592,6 +620,9 @@ impl LeafTable {
     pub fn spans_in<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
         let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
+        if self.kind[iu] == LeafKind::Sphere {
+            return self.ball_spans(i, ray, (tmin, tmax), out);
+        }
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
         let ld = m.transform_vector3(d);
@@ -602,6 +633,24 @@ impl LeafTable {
             return self.spans_rescaled(i, (lo, ld), (tmin, tmax), k, out);
         }
         self.spans_local(i, (lo, ld), (tmin, tmax), out)
+    }
+
+    /// The world point `p` relative to ball `iu`'s centre, in f64 (the f32
+    /// difference to the anchor is exact in f64), and its radius.
+    #[inline(always)]
+    fn ball_frame(&self, iu: usize, p: Vec3) -> (DVec3, f64) {
+        let q = (p.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) - self.p1[iu].truncate().as_dvec3();
+        (q, self.p0[iu].x as f64 + self.p0[iu].y as f64)
+    }
+
+    /// The spans of ball `i` (kind [`LeafKind::Sphere`]) along the world ray.
+    #[inline(always)]
+    fn ball_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
+        let (o, r) = self.ball_frame(i as usize, ray.origin);
+        if let Some((t0, t1)) = kernels::ball(o, ray.dir.as_dvec3(), r) {
+            let s = Surf::new(i, kernels::sub::SIDE);
+            push_clipped(out, Span { t0: t0 as f32, s0: s, t1: t1 as f32, s1: s }, tmin, tmax);
+        }
     }
 
     /// [`LeafTable::spans_local`] for a local direction out of the kernels'
@@ -621,7 +670,8 @@ impl LeafTable {
     fn spans_local<S: SpanSink + ?Sized>(&self, i: u32, (lo, ld): (Vec3, Vec3), (tmin, tmax): (f32, f32), out: &mut S) {
         let iu = i as usize;
         let r = match self.kind[iu] {
-            LeafKind::Sphere => kernels::sphere(lo, ld),
+            // (A ball is traced by `ball_spans`; its map is a sphere's too.)
+            LeafKind::Sphere | LeafKind::Ellipsoid => kernels::sphere(lo, ld),
             LeafKind::Cuboid => kernels::cuboid(lo, ld, self.p0[iu].truncate(), self.p1[iu].truncate()),
             LeafKind::Cylinder => kernels::cylinder(lo, ld),
             LeafKind::Cone => kernels::cone(lo, ld, self.p0[iu].x, self.p0[iu].y),
@@ -777,10 +827,14 @@ impl LeafTable {
     /// Is the world point inside leaf `i` (boundary included)?
     pub fn contains(&self, i: u32, p: Vec3) -> bool {
         let iu = i as usize;
+        if self.kind[iu] == LeafKind::Sphere {
+            let (q, r) = self.ball_frame(iu, p);
+            return q.length_squared() <= r * r;
+        }
         let l = self.local_point(iu, p);
         let p0 = self.p0[iu];
         match self.kind[iu] {
-            LeafKind::Sphere => l.length_squared() <= 1.0,
+            LeafKind::Sphere | LeafKind::Ellipsoid => l.length_squared() <= 1.0,
             LeafKind::Cuboid => l.cmpge(p0.truncate()).all() && l.cmple(self.p1[iu].truncate()).all(),
             LeafKind::Cylinder => l.x * l.x + l.y * l.y <= 1.0 && (0.0..=1.0).contains(&l.z),
             LeafKind::Cone => {
@@ -801,6 +855,10 @@ impl LeafTable {
     pub fn normal(&self, i: u32, sub: u32, ray: &Ray, t: f32) -> Vec3 {
         let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
+        if self.kind[iu] == LeafKind::Sphere {
+            let (q, _) = self.ball_frame(iu, o);
+            return (q + d.as_dvec3() * t as f64).try_normalize().map_or(Vec3::Y, |n| n.as_vec3());
+        }
         let m = &self.to_local[iu];
         let p0 = self.p0[iu];
         if self.kind[iu] == LeafKind::Mesh && !self.meshes[self.ext[iu] as usize].normal_needs_point(sub) {
@@ -810,7 +868,7 @@ impl LeafTable {
         }
         let l = self.local_point(iu, o) + m.transform_vector3(d) * t;
         let nl = match self.kind[iu] {
-            LeafKind::Sphere => l,
+            LeafKind::Sphere | LeafKind::Ellipsoid => l,
             LeafKind::Cuboid => {
                 let mut n = Vec3::ZERO;
                 n[(sub / 2) as usize] = if sub % 2 == 1 { 1.0 } else { -1.0 };
