@@ -392,6 +392,55 @@ pub const MIN_SIZE: f64 = 1e-30;
 
 const RANGE_SLACK: f64 = 1.0 + 1e-6;
 
+/// The supported range of a torus's minor-to-major radius ratio. Thinner
+/// tori lose the tube: the kernel works in units of the major radius, and
+/// its f32 local map and ray (6e-8 of the major radius) are ~1e-6 of it
+/// after the quartic (tests/stress.rs `torus_ratios`: span ends within
+/// 2.6e-3 of a view of 4 tube radii at 1e-4, 1.2e-2 and wrong span counts at
+/// 1e-5, a tube of 1e-8 is missed on half the rays). Fatter tori than 1e20
+/// are measured no further (and are spheres to f64 precision).
+pub const TORUS_RATIO: (f64, f64) = (1e-4, 1e20);
+
+/// Checks the sizes of a leaf's own parameters that the map's axes do not
+/// carry: a box's half extents along its (mapped) local axes (0, a flat and
+/// empty box, is accepted), a torus's minor-to-major ratio and its minor
+/// radius after transforms.
+fn check_own_sizes(shape: &LeafShape, m: &DMat3) -> Result<(), LeafError> {
+    let axes = [m.x_axis.length(), m.y_axis.length(), m.z_axis.length()];
+    let size_range = MIN_SIZE / RANGE_SLACK..=MAX_COORD * RANGE_SLACK;
+    match *shape {
+        LeafShape::Cuboid(b) => {
+            for k in 0..3 {
+                let h = 0.5 * (b.max[k] as f64 - b.min[k] as f64) * axes[k];
+                if h != 0.0 && !size_range.contains(&h) {
+                    return Err(LeafError::OutOfRange(format!(
+                        "its half extent along its local axis {k} is {h:.3e} after transforms, outside the supported {MIN_SIZE:e} to {MAX_COORD:e} (0, a flat box, is accepted)"
+                    )));
+                }
+            }
+        }
+        LeafShape::Torus(t) => {
+            let ratio = t.minor as f64 / t.major as f64;
+            let (lo, hi) = TORUS_RATIO;
+            // (The slack of the f32 numbers: 1e-4 in f32 is 0.99999997e-4.)
+            if !(lo / RANGE_SLACK..=hi * RANGE_SLACK).contains(&ratio) {
+                return Err(LeafError::OutOfRange(format!(
+                    "its minor-to-major radius ratio is {ratio:.3e}, outside the supported {lo:e} to {hi:e}"
+                )));
+            }
+            // (`axes` are the canonical map's: the major radius after transforms.)
+            let minor = axes.iter().fold(f64::INFINITY, |a, &l| a.min(l)) * ratio;
+            if !size_range.contains(&minor) {
+                return Err(LeafError::OutOfRange(format!(
+                    "its minor radius is {minor:.3e} after transforms, outside the supported {MIN_SIZE:e} to {MAX_COORD:e}"
+                )));
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
 /// Checks the supported range of a leaf placed by `m` (local to world), with
 /// world bounds `bounds` (`None` for a half-space, whose bounds may be
 /// infinite; every other kind's must be finite) and anchor `anchor`.
@@ -559,6 +608,7 @@ impl LeafTable {
         let anchor = m.transform_point3(local_anchor).as_vec3();
         let (inv32, b) = Self::inverse32(&m, anchor)?;
         check_range(&m.matrix3, (c.kind != LeafKind::HalfSpace).then_some(&bounds), anchor)?;
+        check_own_sizes(shape, &m.matrix3)?;
         // Boxes and planes take the anchor's local point into their own
         // parameters, in f64 (a box 1e5 from the origin keeps bounds relative to
         // its centre, a plane its offset relative to the anchor); the map is
