@@ -14,7 +14,7 @@ use rothray::primitives::Span;
 
 use crate::oracle::*;
 
-fn r32(x: f64) -> f64 {
+pub(crate) fn r32(x: f64) -> f64 {
     x as f32 as f64
 }
 
@@ -63,7 +63,7 @@ pub fn solids(c: DVec3, s: f64) -> Vec<(&'static str, Shape)> {
 /// Crossings of the model along `o + t d` on `[t0, t1]`: n uniform samples
 /// plus the `extra` points (the engine's span midpoints, so that a chord
 /// between two samples is still seen), bisected to f64 precision.
-fn model_crossings(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, (t0, t1): (f64, f64), n: usize, extra: &[f64]) -> Vec<f64> {
+pub(crate) fn model_crossings(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, (t0, t1): (f64, f64), n: usize, extra: &[f64]) -> Vec<f64> {
     let mut ts: Vec<f64> = (0..=n).map(|k| t0 + (t1 - t0) * k as f64 / n as f64).collect();
     ts.extend(extra.iter().filter(|t| **t > t0 && **t < t1));
     ts.sort_by(f64::total_cmp);
@@ -95,7 +95,7 @@ fn model_crossings(f: &dyn Fn(DVec3) -> bool, o: DVec3, d: DVec3, (t0, t1): (f64
 }
 
 /// Drops chords and gaps shorter than `min` (in t) from a crossing list.
-fn robust(mut x: Vec<f64>, min: f64) -> Vec<f64> {
+pub(crate) fn robust(mut x: Vec<f64>, min: f64) -> Vec<f64> {
     loop {
         let short = (0..x.len().saturating_sub(1)).find(|&i| x[i + 1] - x[i] < min);
         match short {
@@ -130,7 +130,7 @@ pub struct Stats {
 /// (A chord of `min` or more in one list that is not even half that long in
 /// the other; one just over the line on one side and just under it on the
 /// other is not.)
-fn wrong_count(got: &[f64], want: &[f64], min: f64) -> bool {
+pub(crate) fn wrong_count(got: &[f64], want: &[f64], min: f64) -> bool {
     let (g, w) = (robust(got.to_vec(), min), robust(want.to_vec(), min));
     g.len() != w.len() && (g.len() > robust(want.to_vec(), 0.5 * min).len() || w.len() > robust(got.to_vec(), 0.5 * min).len())
 }
