@@ -168,16 +168,21 @@ fn scale_range_rejects_own_sizes_and_camera() {
     expect_error(&scene_with(thin_torus), &[&format!("{at}.torus"), "minor-to-major radius ratio is 1.000e-5", "1e-4 to 1e20"]);
     let fat_torus = r#"{"torus":{"center":[0,0,0],"axis":[0,1,0],"major":1e-22,"minor":1}}"#;
     expect_error(&scene_with(fat_torus), &[&format!("{at}.torus"), "ratio is 1.000e22", "1e-4 to 1e20"]);
-    let tiny_tube =
-        r#"{"transformed":{"shape":{"torus":{"center":[0,0,0],"axis":[0,1,0],"major":1,"minor":1e-3}},"scale":1e-28}}"#;
+    let tiny_tube = r#"{"transformed":{"shape":{"torus":{"center":[0,0,0],"axis":[0,1,0],"major":1,"minor":1e-3}},"scale":1e-28}}"#;
     expect_error(&scene_with(tiny_tube), &[&format!("{at}.transformed.shape.torus"), "minor radius is 1.000e-31", "1e-30 to 1e30"]);
     // The camera.
     let cam = |c: &str| format!(r#"{{"camera":{{{c}}},"image":{{"width":8,"height":8}},"objects":[]}}"#);
     let ok = r#""target":[0,0,0],"up":[0,1,0],"fov_y_deg":40"#;
     expect_error(&cam(&format!(r#""eye":[0,0,2e30],{ok}"#)), &["camera.eye", "2.000e30", "-1e30 to 1e30"]);
     expect_error(&cam(r#""eye":[0,0,5],"target":[-3e30,0,0],"fov_y_deg":40"#), &["camera.target", "-1e30 to 1e30"]);
-    expect_error(&cam(r#""eye":[1e20,0,0],"target":[1.0000000000001e20,0,0],"fov_y_deg":40"#), &["camera.target", "target equals eye once rounded to f32"]);
-    expect_error(&cam(r#""eye":[0,0,5],"target":[0,0,0],"fov_y_deg":0.001"#), &["camera.fov_y_deg", "between 0.01 and 179.9 degrees", "got 0.001"]);
+    expect_error(
+        &cam(r#""eye":[1e20,0,0],"target":[1.0000000000001e20,0,0],"fov_y_deg":40"#),
+        &["camera.target", "target equals eye once rounded to f32"],
+    );
+    expect_error(
+        &cam(r#""eye":[0,0,5],"target":[0,0,0],"fov_y_deg":0.001"#),
+        &["camera.fov_y_deg", "between 0.01 and 179.9 degrees", "got 0.001"],
+    );
     expect_error(&cam(r#""eye":[0,0,5],"target":[0,0,0],"fov_y_deg":179.95"#), &["camera.fov_y_deg", "179.9"]);
     expect_error(&cam(r#""eye":[0,0,5],"target":[0,0,0],"up":[0,0,1e-50],"fov_y_deg":40"#), &["camera.up", "zero vector"]);
     expect_error(&cam(r#""eye":[0,0,5],"target":[0,0,0],"up":[1e-6,0,1],"fov_y_deg":40"#), &["camera.up", "parallel", "1e-5 rad"]);

@@ -244,11 +244,7 @@ fn table() -> Vec<(String, String, Stats)> {
 #[test]
 fn stress_table() {
     let rows = table();
-    let bad: Vec<_> = rows
-        .iter()
-        .filter(|r| !r.1.starts_with("offset 1e6"))
-        .filter(|r| r.2.max_err > 1e-5 || r.2.topo > 0)
-        .collect();
+    let bad: Vec<_> = rows.iter().filter(|r| !r.1.starts_with("offset 1e6")).filter(|r| r.2.max_err > 1e-5 || r.2.topo > 0).collect();
     for r in &bad {
         println!("MISSES: {} at {}: {:.2e} / {:.2e}, {} wrong counts", r.0, r.1, r.2.max_err, r.2.max_err_long, r.2.topo);
     }

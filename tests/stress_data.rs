@@ -198,15 +198,8 @@ fn solids(c: DVec3, s: f64) -> Vec<(&'static str, Model)> {
     let c = rv(c);
     // A non-planar chain of two segments, tangent-continuous in its design
     // (f32 rounding leaves a kink of ~1e-7 rad), and its planar shadow.
-    let xyz = [
-        [-0.7, -0.3, 0.1],
-        [-0.4, 0.4, 0.3],
-        [-0.1, 0.3, -0.2],
-        [0.1, 0.0, -0.1],
-        [0.3, -0.3, 0.0],
-        [0.5, -0.2, 0.4],
-        [0.7, 0.3, 0.2],
-    ];
+    let xyz =
+        [[-0.7, -0.3, 0.1], [-0.4, 0.4, 0.3], [-0.1, 0.3, -0.2], [0.1, 0.0, -0.1], [0.3, -0.3, 0.0], [0.5, -0.2, 0.4], [0.7, 0.3, 0.2]];
     let radii = [0.15, 0.2, 0.1, 0.18, 0.26, 0.12, 0.2];
     let at = |q: [f64; 3], z: bool| rv(c + DVec3::new(q[0], q[1], if z { q[2] } else { 0.0 }) * s);
     let sweep = Model::Sweep(
@@ -219,7 +212,8 @@ fn solids(c: DVec3, s: f64) -> Vec<(&'static str, Model)> {
             .collect(),
     );
     let tube = Model::Tube { path: xyz.iter().map(|q| at(*q, true)).collect(), r: r32(0.15 * s) };
-    let poly = [[0.12, -0.06], [0.12, 0.06], [-0.12, 0.06], [-0.12, -0.06], [0.0, -0.1]].iter().map(|q| [r32(q[0] * s), r32(q[1] * s)]).collect();
+    let poly =
+        [[0.12, -0.06], [0.12, 0.06], [-0.12, 0.06], [-0.12, -0.06], [0.0, -0.1]].iter().map(|q| [r32(q[0] * s), r32(q[1] * s)]).collect();
     let prism = Model::Prism { path: xyz.iter().map(|q| at(*q, false)).collect(), n: DVec3::Z, poly, twist: (40f32 as f64).to_radians() };
     // The octahedron: exact in f32 (see the module docs).
     let (oc, or) = if c == DVec3::ZERO { (c, 2f64.powi((0.8 * s).log2().floor() as i32)) } else { ((c * 8.0).round() / 8.0, 1.0) };
