@@ -115,6 +115,7 @@ fn group_config(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::Wa
 fn kind_name(k: LeafKind) -> &'static str {
     match k {
         LeafKind::Sphere => "sphere",
+        LeafKind::Ellipsoid => "ellipsoid",
         LeafKind::Cuboid => "box",
         LeafKind::Cylinder => "cylinder",
         LeafKind::Cone => "cone",

@@ -20,4 +20,5 @@ mod render_flat;
 mod scale_range;
 mod split;
 mod stress;
+mod stress_data;
 mod tiles;

@@ -145,3 +145,73 @@ fn scale_range_rejected_with_the_range() {
     let tiny = r#"{"transformed":{"shape":{"sphere":{"center":[0,0,0],"radius":1e-30}},"scale":1e-30}}"#;
     expect_error(&scene_with(tiny), &["objects[0].shape.union[1].transformed.shape.sphere", "1e-30 to 1e30"]);
 }
+
+/// The sizes a leaf's map does not carry, and the camera: located errors
+/// that state the supported range.
+#[test]
+fn scale_range_rejects_own_sizes_and_camera() {
+    use crate::bad_input::{expect_error, scene_with};
+    let at = "objects[0].shape.union[1]";
+    let thin_box = r#"{"box":{"min":[0,0,0],"max":[1e-31,1,1]}}"#;
+    expect_error(
+        &scene_with(thin_box),
+        &[&format!("{at}.box"), "half extent along its local axis 0 is 5.000e-32", "1e-30 to 1e30", "flat box"],
+    );
+    // Thin in the world only through its transform.
+    let scaled_box = r#"{"transformed":{"shape":{"box":{"min":[0,0,0],"max":[1,1,1e-10]}},"scale":[1,1,1e-21]}}"#;
+    expect_error(&scene_with(scaled_box), &[&format!("{at}.transformed.shape.box"), "local axis 2 is 5.000e-32"]);
+    // A flat box is empty, and accepted.
+    let flat = dir_scene("flat", &scene_with(r#"{"box":{"min":[0,0,0],"max":[0,1,1]}}"#));
+    let out = crate::bad_input::rothray().arg("render").arg(&flat).arg("-o").arg(flat.with_extension("png")).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let thin_torus = r#"{"torus":{"center":[0,0,0],"axis":[0,1,0],"major":1,"minor":1e-5}}"#;
+    expect_error(&scene_with(thin_torus), &[&format!("{at}.torus"), "minor-to-major radius ratio is 1.000e-5", "1e-4 to 1e20"]);
+    let fat_torus = r#"{"torus":{"center":[0,0,0],"axis":[0,1,0],"major":1e-22,"minor":1}}"#;
+    expect_error(&scene_with(fat_torus), &[&format!("{at}.torus"), "ratio is 1.000e22", "1e-4 to 1e20"]);
+    let tiny_tube = r#"{"transformed":{"shape":{"torus":{"center":[0,0,0],"axis":[0,1,0],"major":1,"minor":1e-3}},"scale":1e-28}}"#;
+    expect_error(&scene_with(tiny_tube), &[&format!("{at}.transformed.shape.torus"), "minor radius is 1.000e-31", "1e-30 to 1e30"]);
+    // The camera.
+    let cam = |c: &str| format!(r#"{{"camera":{{{c}}},"image":{{"width":8,"height":8}},"objects":[]}}"#);
+    let ok = r#""target":[0,0,0],"up":[0,1,0],"fov_y_deg":40"#;
+    expect_error(&cam(&format!(r#""eye":[0,0,2e30],{ok}"#)), &["camera.eye", "2.000e30", "-1e30 to 1e30"]);
+    expect_error(&cam(r#""eye":[0,0,5],"target":[-3e30,0,0],"fov_y_deg":40"#), &["camera.target", "-1e30 to 1e30"]);
+    expect_error(
+        &cam(r#""eye":[1e20,0,0],"target":[1.0000000000001e20,0,0],"fov_y_deg":40"#),
+        &["camera.target", "target equals eye once rounded to f32"],
+    );
+    expect_error(
+        &cam(r#""eye":[0,0,5],"target":[0,0,0],"fov_y_deg":0.001"#),
+        &["camera.fov_y_deg", "between 0.01 and 179.9 degrees", "got 0.001"],
+    );
+    expect_error(&cam(r#""eye":[0,0,5],"target":[0,0,0],"fov_y_deg":179.95"#), &["camera.fov_y_deg", "179.9"]);
+    expect_error(&cam(r#""eye":[0,0,5],"target":[0,0,0],"up":[0,0,1e-50],"fov_y_deg":40"#), &["camera.up", "zero vector"]);
+    expect_error(&cam(r#""eye":[0,0,5],"target":[0,0,0],"up":[1e-6,0,1],"fov_y_deg":40"#), &["camera.up", "parallel", "1e-5 rad"]);
+}
+
+fn dir_scene(name: &str, json: &str) -> std::path::PathBuf {
+    let f = crate::bad_input::tmpdir("range").join(format!("{name}.json"));
+    std::fs::write(&f, json).unwrap();
+    f
+}
+
+/// Cameras at the ends of the range aim where they are told: a view 1e20
+/// long (its square overflows f32; the view fell back to -z) and an up
+/// vector 1e-20 long (taken as parallel to every view).
+#[test]
+fn scale_range_cameras() {
+    use rothray::engine::Camera;
+    let dir = |c: Camera| c.rays(9, 9).ray(4.5, 4.5).dir.as_dvec3();
+    let far = Camera { eye: glam::Vec3::new(1e20, 2e19, 0.0), target: glam::Vec3::ZERO, up: glam::Vec3::Y, fov_y_deg: 40.0 };
+    let want = DVec3::new(-1e20, -2e19, 0.0).normalize();
+    assert!((dir(far) - want).length() < 1e-6, "{:?}", dir(far));
+    let near = Camera { eye: glam::Vec3::new(1e-20, 0.0, 0.0), target: glam::Vec3::ZERO, ..far };
+    assert!((dir(near) - DVec3::NEG_X).length() < 1e-6, "{:?}", dir(near));
+    // The ray a row above the centre leans toward +y with any up length.
+    let up_of = |up: glam::Vec3| {
+        let c = Camera { eye: glam::Vec3::new(0.0, 0.0, 5.0), target: glam::Vec3::ZERO, up, fov_y_deg: 40.0 };
+        c.rays(9, 9).ray(4.5, 3.5).dir
+    };
+    for l in [1e-20f32, 1e-10, 1e10, 1e20] {
+        assert_eq!(up_of(glam::Vec3::Y * l), up_of(glam::Vec3::Y), "up of length {l}");
+    }
+}

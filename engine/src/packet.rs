@@ -233,7 +233,7 @@ pub(crate) fn bake_packet_paths(scene: &mut RenderScene) {
             .iter()
             .map(|&l| {
                 use rothray_primitives::table::LeafKind::*;
-                let cheap = matches!(scene.leaves.kind[l as usize], Sphere | Cuboid | Cylinder | Cone | HalfSpace);
+                let cheap = matches!(scene.leaves.kind[l as usize], Sphere | Ellipsoid | Cuboid | Cylinder | Cone | HalfSpace);
                 if cheap {
                     l
                 } else {

@@ -42,11 +42,24 @@ pub struct CameraRays {
     h: f32,
 }
 
+/// `v` normalised in f32 while its squared length is in f32's normal range,
+/// else `v64()` normalised in f64: the square of a view 1e20 long overflows
+/// f32 (its direction fell back to -z), that of one 1e-20 long underflows.
+/// `fallback` for a zero vector.
+fn unit(v: Vec3, v64: impl Fn() -> glam::DVec3, fallback: Vec3) -> Vec3 {
+    if (1e-30..=1e30).contains(&v.length_squared()) {
+        return v.normalize();
+    }
+    v64().try_normalize().map_or(fallback, |u| u.as_vec3())
+}
+
 impl Camera {
     /// Prepares ray generation for a `width` x `height` image.
     pub fn rays(&self, width: u32, height: u32) -> CameraRays {
-        let fwd = (self.target - self.eye).normalize_or(Vec3::NEG_Z);
-        let mut right = fwd.cross(self.up);
+        let fwd = unit(self.target - self.eye, || self.target.as_dvec3() - self.eye.as_dvec3(), Vec3::NEG_Z);
+        // A unit up: the parallel test below is then on a sine (an up 1e-10
+        // long was taken as parallel to every view).
+        let mut right = fwd.cross(unit(self.up, || self.up.as_dvec3(), Vec3::Y));
         if right.length_squared() < 1e-12 {
             right = fwd.any_orthonormal_vector();
         }

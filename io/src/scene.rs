@@ -10,7 +10,7 @@ use rothray_engine::{
     Camera, Cone, CsgNode, Cuboid, Cylinder, Frame, GeneralizedCylinder, HalfSpace, InsideRule, Light, Material, MeshData, MeshSolid, Name,
     ObjectOrder, Op, Profile, Sphere, SweptSphere, Torus, Transform,
 };
-use rothray_primitives::LeafShape;
+use rothray_primitives::{table::MAX_COORD, LeafShape};
 use serde::Deserialize;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -191,6 +191,12 @@ impl Ctx<'_> {
 }
 
 /// The number, if it is one and finite in f32.
+/// The supported vertical field of view, in degrees. Narrower views have
+/// pixel directions closer than f32 resolves (at 1080 rows, 0.01 degrees
+/// is 1.6e-7 rad a row, under 3 ulps of a unit direction); at 180 the
+/// tangent of the half angle is infinite (179.9: 1146).
+pub const FOV_RANGE: (f64, f64) = (0.01, 179.9);
+
 fn finite_f32(v: &Value) -> Option<f64> {
     v.as_f64().filter(|x| x.is_finite() && x.abs() <= f32::MAX as f64)
 }
@@ -340,17 +346,31 @@ fn parse_root(cx: &mut Ctx, root: &Value, path: &Path) -> R<SceneFile> {
         None => DVec3::Y,
     };
     let fov = cx.num(&cm["fov_y_deg"], "camera.fov_y_deg")?;
-    if !(fov > 0.0 && fov < 180.0) {
-        return cx.err("camera.fov_y_deg", format!("must be between 0 and 180 degrees, got {fov}"));
+    let (fov_lo, fov_hi) = FOV_RANGE;
+    if !(fov_lo..=fov_hi).contains(&fov) {
+        return cx.err("camera.fov_y_deg", format!("must be between {fov_lo} and {fov_hi} degrees (the supported range), got {fov}"));
     }
-    if (target - eye).length() == 0.0 {
-        return cx.err("camera.target", "target equals eye");
+    for (v, at) in [(eye, "camera.eye"), (target, "camera.target")] {
+        let far = v.abs().max_element();
+        if far > MAX_COORD * (1.0 + 1e-6) {
+            return cx.err(at, format!("a coordinate of {far:.3e} is outside the supported -{MAX_COORD:e} to {MAX_COORD:e}"));
+        }
     }
-    if up.length() == 0.0 {
-        return cx.err("camera.up", "is the zero vector");
+    // The camera is f32: compare what it will hold (eye and target 1 apart
+    // at 1e20 are one point in f32, whose spacing there is 8.8e12).
+    let view = target.as_vec3().as_dvec3() - eye.as_vec3().as_dvec3();
+    if view.length() == 0.0 {
+        let how = if (target - eye).length() == 0.0 { "" } else { " once rounded to f32 (the scene's coordinates are f32)" };
+        return cx.err("camera.target", format!("target equals eye{how}"));
     }
-    if (target - eye).normalize().cross(up.normalize()).length() < 1e-9 {
-        return cx.err("camera.up", "is parallel to the viewing direction");
+    let up32 = up.as_vec3().as_dvec3();
+    if up32.length() == 0.0 {
+        return cx.err("camera.up", "is the zero vector (or below f32's smallest number)");
+    }
+    // The renderer takes any up whose sine with the view is at least 1e-6
+    // (in f32); 1e-5 leaves room for its rounding.
+    if view.normalize().cross(up32.normalize()).length() < 1e-5 {
+        return cx.err("camera.up", "is parallel to the viewing direction (supported: at least 1e-5 rad away from it)");
     }
     let camera = Camera { eye: eye.as_vec3(), target: target.as_vec3(), up: up.as_vec3(), fov_y_deg: fov as f32 };
     // image

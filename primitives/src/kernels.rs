@@ -51,6 +51,32 @@ pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
     Some((t0, sub::SIDE, t1, sub::SIDE))
 }
 
+/// Ball of radius `r` around the origin, for the line `o + t d` with `o`
+/// relative to the centre, in f64 (world units: no map, no rescaling).
+///
+/// Why f64: a chord of length `L` of a ball of radius `r` lies `L^2 / (8 r)`
+/// inside the surface, 2e-8 r for a chord of 1e-4 of a view of 4 radii; the
+/// f32 closest approach of a line from 4 radii away is off by ~4 eps r =
+/// 5e-7 r, and the f32 map of [`sphere`] (1/r rounded) by 6e-8 r, so in f32
+/// whether such a chord exists at all was decided by rounding (the stress
+/// table's wrong span counts). In f64 both are ~1e-15 r: the answer is that
+/// of the f32 inputs, rounded once to f32 t. The f64 ranges need no
+/// rescaling: |o|^2 <= 1e61, |d|^2 within 1e-90..1e77.
+#[inline(always)]
+pub fn ball(o: DVec3, d: DVec3, r: f64) -> Option<(f64, f64)> {
+    let a = d.length_squared();
+    let b = o.dot(d);
+    let f = o - d * (b / a);
+    let disc = a * (r * r - f.length_squared());
+    if !(disc >= 0.0) {
+        return None;
+    }
+    let c = o.length_squared() - r * r;
+    let q = -(b + disc.sqrt().copysign(b));
+    let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
+    Some(if t0 <= t1 { (t0, t1) } else { (t1, t0) })
+}
+
 /// Axis-aligned box `[mn, mx]`; sub = axis * 2 + (1 for the max face).
 #[inline(always)]
 pub fn cuboid(o: Vec3, d: Vec3, mn: Vec3, mx: Vec3) -> Option<Range> {

@@ -13,7 +13,9 @@
 //!
 //! The table is struct-of-arrays; the hot path does one `match` on the fieldless
 //! [`LeafKind`]. Kernels live in [`kernels`] (f32, except the torus quartic, which
-//! is solved in f64 by [`quartic`]; [`poly`] holds the general root finders). [`bvh::FlatBvh`] is the BVH every level of the
+//! is solved in f64 by [`quartic`], and the ball, a sphere under similarities,
+//! traced in world space in f64 so that tangent chords are those of its f32
+//! inputs; [`poly`] holds the general root finders). [`bvh::FlatBvh`] is the BVH every level of the
 //! engine uses (built with obvhs).
 #![warn(missing_docs)]
 

@@ -94,8 +94,14 @@ pub enum LeafShape {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum LeafKind {
-    /// Unit sphere.
+    /// Ball, traced in world space in f64 ([`kernels::ball`]): a sphere
+    /// whose transforms are similarities (rotation, uniform scale,
+    /// translation). Centre `anchor + p1.xyz`, radius `p0.x + p0.y` (f32 and
+    /// its f64 residual).
     Sphere,
+    /// Unit sphere under a map that is not a similarity (an ellipsoid in the
+    /// world), traced in local space ([`kernels::sphere`]).
+    Ellipsoid,
     /// Box `[p0, p1]`.
     Cuboid,
     /// Unit capped cylinder.
@@ -285,6 +291,17 @@ impl LeafShape {
     }
 }
 
+/// The scale of `m` when it is a similarity (orthogonal columns of one
+/// length, to 1e-10: 1e-3 of f32's resolution), else `None`.
+fn similarity_scale(m: &DMat3) -> Option<f64> {
+    let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
+    let l = (x.length() + y.length() + z.length()) / 3.0;
+    let tol = 1e-10 * l;
+    let same = [x, y, z].iter().all(|c| (c.length() - l).abs() <= tol);
+    let square = [x.dot(y), y.dot(z), z.dot(x)].iter().all(|d| d.abs() <= tol * l);
+    (same && square && l.is_finite()).then_some(l)
+}
+
 fn axis_frame(a: Vec3, b: Vec3, r: f64) -> DAffine3 {
     let a = a.as_dvec3();
     let ax = b.as_dvec3() - a;
@@ -305,7 +322,7 @@ pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
     let t = m.translation;
     let to = |lo: DVec3, hi: DVec3| Aabb::new(lo.as_vec3(), hi.as_vec3());
     match c.kind {
-        LeafKind::Sphere => {
+        LeafKind::Sphere | LeafKind::Ellipsoid => {
             let e = DVec3::new(a.row(0).length(), a.row(1).length(), a.row(2).length());
             to(t - e, t + e)
         }
@@ -374,6 +391,55 @@ pub const MAX_COORD: f64 = 1e30;
 pub const MIN_SIZE: f64 = 1e-30;
 
 const RANGE_SLACK: f64 = 1.0 + 1e-6;
+
+/// The supported range of a torus's minor-to-major radius ratio. Thinner
+/// tori lose the tube: the kernel works in units of the major radius, and
+/// its f32 local map and ray (6e-8 of the major radius) are ~1e-6 of it
+/// after the quartic (tests/stress.rs `torus_ratios`: span ends within
+/// 2.6e-3 of a view of 4 tube radii at 1e-4, 1.2e-2 and wrong span counts at
+/// 1e-5, a tube of 1e-8 is missed on half the rays). Fatter tori than 1e20
+/// are measured no further (and are spheres to f64 precision).
+pub const TORUS_RATIO: (f64, f64) = (1e-4, 1e20);
+
+/// Checks the sizes of a leaf's own parameters that the map's axes do not
+/// carry: a box's half extents along its (mapped) local axes (0, a flat and
+/// empty box, is accepted), a torus's minor-to-major ratio and its minor
+/// radius after transforms.
+fn check_own_sizes(shape: &LeafShape, m: &DMat3) -> Result<(), LeafError> {
+    let axes = [m.x_axis.length(), m.y_axis.length(), m.z_axis.length()];
+    let size_range = MIN_SIZE / RANGE_SLACK..=MAX_COORD * RANGE_SLACK;
+    match *shape {
+        LeafShape::Cuboid(b) => {
+            for k in 0..3 {
+                let h = 0.5 * (b.max[k] as f64 - b.min[k] as f64) * axes[k];
+                if h != 0.0 && !size_range.contains(&h) {
+                    return Err(LeafError::OutOfRange(format!(
+                        "its half extent along its local axis {k} is {h:.3e} after transforms, outside the supported {MIN_SIZE:e} to {MAX_COORD:e} (0, a flat box, is accepted)"
+                    )));
+                }
+            }
+        }
+        LeafShape::Torus(t) => {
+            let ratio = t.minor as f64 / t.major as f64;
+            let (lo, hi) = TORUS_RATIO;
+            // (The slack of the f32 numbers: 1e-4 in f32 is 0.99999997e-4.)
+            if !(lo / RANGE_SLACK..=hi * RANGE_SLACK).contains(&ratio) {
+                return Err(LeafError::OutOfRange(format!(
+                    "its minor-to-major radius ratio is {ratio:.3e}, outside the supported {lo:e} to {hi:e}"
+                )));
+            }
+            // (`axes` are the canonical map's: the major radius after transforms.)
+            let minor = axes.iter().fold(f64::INFINITY, |a, &l| a.min(l)) * ratio;
+            if !size_range.contains(&minor) {
+                return Err(LeafError::OutOfRange(format!(
+                    "its minor radius is {minor:.3e} after transforms, outside the supported {MIN_SIZE:e} to {MAX_COORD:e}"
+                )));
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
 
 /// Checks the supported range of a leaf placed by `m` (local to world), with
 /// world bounds `bounds` (`None` for a half-space, whose bounds may be
@@ -542,16 +608,28 @@ impl LeafTable {
         let anchor = m.transform_point3(local_anchor).as_vec3();
         let (inv32, b) = Self::inverse32(&m, anchor)?;
         check_range(&m.matrix3, (c.kind != LeafKind::HalfSpace).then_some(&bounds), anchor)?;
+        check_own_sizes(shape, &m.matrix3)?;
         // Boxes and planes take the anchor's local point into their own
         // parameters, in f64 (a box 1e5 from the origin keeps bounds relative to
         // its centre, a plane its offset relative to the anchor); the map is
         // then linear.
-        let (inv32, p0, p1) = match c.kind {
+        let (kind, (inv32, p0, p1)) = match c.kind {
+            LeafKind::Sphere => match similarity_scale(&m.matrix3) {
+                // The ball's centre and radius in f64, kept as f32 numbers
+                // and residuals (see `LeafKind::Sphere`): with no transform
+                // both are the description's own f32 numbers, exactly.
+                Some(r) => {
+                    let e = (m.translation - anchor.as_dvec3()).as_vec3();
+                    let r32 = r as f32;
+                    (LeafKind::Sphere, (inv32, Vec4::new(r32, (r - r32 as f64) as f32, 0.0, 0.0), e.extend(0.0)))
+                }
+                None => (LeafKind::Ellipsoid, (inv32, c.p0, c.p1)),
+            },
             LeafKind::Cuboid => {
                 let lo = c.p0.truncate().as_dvec3() - b;
                 let hi = c.p1.truncate().as_dvec3() - b;
                 let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
-                (z, lo.as_vec3().extend(0.0), hi.as_vec3().extend(0.0))
+                (c.kind, (z, lo.as_vec3().extend(0.0), hi.as_vec3().extend(0.0)))
             }
             LeafKind::HalfSpace => {
                 // From the description's f32 numbers in f64: the canonical
@@ -561,12 +639,12 @@ impl LeafTable {
                 let n = h.normal.as_dvec3();
                 let w = (h.offset as f64 - n.dot(b)) / n.length();
                 let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
-                (z, c.p0.truncate().extend(w as f32), c.p1)
+                (c.kind, (z, c.p0.truncate().extend(w as f32), c.p1))
             }
-            _ => (inv32, c.p0, c.p1),
+            _ => (c.kind, (inv32, c.p0, c.p1)),
         };
         let i = self.kind.len() as u32;
-        self.kind.push(c.kind);
+        self.kind.push(kind);
         self.to_local.push(inv32);
         self.anchor.push(anchor.into());
         self.p0.push(p0);
@@ -592,6 +670,9 @@ impl LeafTable {
     pub fn spans_in<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
         let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
+        if self.kind[iu] == LeafKind::Sphere {
+            return self.ball_spans(i, ray, (tmin, tmax), out);
+        }
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
         let ld = m.transform_vector3(d);
@@ -602,6 +683,24 @@ impl LeafTable {
             return self.spans_rescaled(i, (lo, ld), (tmin, tmax), k, out);
         }
         self.spans_local(i, (lo, ld), (tmin, tmax), out)
+    }
+
+    /// The world point `p` relative to ball `iu`'s centre, in f64 (the f32
+    /// difference to the anchor is exact in f64), and its radius.
+    #[inline(always)]
+    fn ball_frame(&self, iu: usize, p: Vec3) -> (DVec3, f64) {
+        let q = (p.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) - self.p1[iu].truncate().as_dvec3();
+        (q, self.p0[iu].x as f64 + self.p0[iu].y as f64)
+    }
+
+    /// The spans of ball `i` (kind [`LeafKind::Sphere`]) along the world ray.
+    #[inline(always)]
+    fn ball_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
+        let (o, r) = self.ball_frame(i as usize, ray.origin);
+        if let Some((t0, t1)) = kernels::ball(o, ray.dir.as_dvec3(), r) {
+            let s = Surf::new(i, kernels::sub::SIDE);
+            push_clipped(out, Span { t0: t0 as f32, s0: s, t1: t1 as f32, s1: s }, tmin, tmax);
+        }
     }
 
     /// [`LeafTable::spans_local`] for a local direction out of the kernels'
@@ -621,7 +720,8 @@ impl LeafTable {
     fn spans_local<S: SpanSink + ?Sized>(&self, i: u32, (lo, ld): (Vec3, Vec3), (tmin, tmax): (f32, f32), out: &mut S) {
         let iu = i as usize;
         let r = match self.kind[iu] {
-            LeafKind::Sphere => kernels::sphere(lo, ld),
+            // (A ball is traced by `ball_spans`; its map is a sphere's too.)
+            LeafKind::Sphere | LeafKind::Ellipsoid => kernels::sphere(lo, ld),
             LeafKind::Cuboid => kernels::cuboid(lo, ld, self.p0[iu].truncate(), self.p1[iu].truncate()),
             LeafKind::Cylinder => kernels::cylinder(lo, ld),
             LeafKind::Cone => kernels::cone(lo, ld, self.p0[iu].x, self.p0[iu].y),
@@ -777,10 +877,14 @@ impl LeafTable {
     /// Is the world point inside leaf `i` (boundary included)?
     pub fn contains(&self, i: u32, p: Vec3) -> bool {
         let iu = i as usize;
+        if self.kind[iu] == LeafKind::Sphere {
+            let (q, r) = self.ball_frame(iu, p);
+            return q.length_squared() <= r * r;
+        }
         let l = self.local_point(iu, p);
         let p0 = self.p0[iu];
         match self.kind[iu] {
-            LeafKind::Sphere => l.length_squared() <= 1.0,
+            LeafKind::Sphere | LeafKind::Ellipsoid => l.length_squared() <= 1.0,
             LeafKind::Cuboid => l.cmpge(p0.truncate()).all() && l.cmple(self.p1[iu].truncate()).all(),
             LeafKind::Cylinder => l.x * l.x + l.y * l.y <= 1.0 && (0.0..=1.0).contains(&l.z),
             LeafKind::Cone => {
@@ -801,6 +905,10 @@ impl LeafTable {
     pub fn normal(&self, i: u32, sub: u32, ray: &Ray, t: f32) -> Vec3 {
         let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
+        if self.kind[iu] == LeafKind::Sphere {
+            let (q, _) = self.ball_frame(iu, o);
+            return (q + d.as_dvec3() * t as f64).try_normalize().map_or(Vec3::Y, |n| n.as_vec3());
+        }
         let m = &self.to_local[iu];
         let p0 = self.p0[iu];
         if self.kind[iu] == LeafKind::Mesh && !self.meshes[self.ext[iu] as usize].normal_needs_point(sub) {
@@ -810,7 +918,7 @@ impl LeafTable {
         }
         let l = self.local_point(iu, o) + m.transform_vector3(d) * t;
         let nl = match self.kind[iu] {
-            LeafKind::Sphere => l,
+            LeafKind::Sphere | LeafKind::Ellipsoid => l,
             LeafKind::Cuboid => {
                 let mut n = Vec3::ZERO;
                 n[(sub / 2) as usize] = if sub % 2 == 1 { 1.0 } else { -1.0 };
