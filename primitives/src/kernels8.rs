@@ -1,5 +1,5 @@
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-//! The convex analytic kernels (sphere, box, cylinder, half-space) for eight
+//! The convex analytic kernels (ball, ellipsoid, box, cylinder, half-space) for eight
 //! rays at once, struct-of-arrays: a packet's lanes are mapped into the
 //! leaf's local space and solved with 8-lane SIMD, AVX where the CPU has it
 //! (chosen at run time), two SSE2 halves otherwise.
@@ -9,8 +9,10 @@
 //! in the same order as the scalar map and kernels (no fused multiply-add,
 //! whose single rounding would differ), with selects where the scalar code
 //! branches. Lanes whose local direction the scalar path would rescale
-//! ([`Ray::dir_rescale`]) are left to it. The cone (solved in f64) and the
-//! other kinds have no packet kernel.
+//! ([`Ray::dir_rescale`]) are left to it. A ball (a sphere under a
+//! similarity) is solved in f64 from its f32 centre and radius in world
+//! space, as the scalar path does. The cone (solved in f64) and the other
+//! kinds have no packet kernel.
 
 use glam::{Vec3, Vec3A};
 
@@ -329,6 +331,230 @@ mod avx {
     }
 }
 
+/// The 8-lane f64 operations of the ball kernel (as [`V8`]; masks are all
+/// ones or all zeros per lane).
+trait D8: Copy {
+    fn splat(x: f64) -> Self;
+    fn load(a: &[f64; 8]) -> Self;
+    fn store(self) -> [f64; 8];
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+    fn mul(self, o: Self) -> Self;
+    fn div(self, o: Self) -> Self;
+    fn sqrt(self) -> Self;
+    fn neg(self) -> Self;
+    fn copysign(self, s: Self) -> Self;
+    fn le(self, o: Self) -> Self;
+    fn ge(self, o: Self) -> Self;
+    fn eq(self, o: Self) -> Self;
+    fn select(m: Self, a: Self, b: Self) -> Self;
+    fn bitmask(self) -> u32;
+}
+
+#[cfg(target_arch = "x86_64")]
+mod sse_d {
+    use std::arch::x86_64::*;
+
+    /// Four SSE2 pairs.
+    #[derive(Clone, Copy)]
+    pub(super) struct SseD(pub(super) [__m128d; 4]);
+
+    macro_rules! each {
+        ($f:ident, $a:expr, $b:expr) => {
+            unsafe { SseD(std::array::from_fn(|h| $f($a.0[h], $b.0[h]))) }
+        };
+    }
+
+    // SAFETY (every method): SSE2 is part of x86_64.
+    impl super::D8 for SseD {
+        #[inline(always)]
+        fn splat(x: f64) -> Self {
+            unsafe { SseD([_mm_set1_pd(x); 4]) }
+        }
+        #[inline(always)]
+        fn load(a: &[f64; 8]) -> Self {
+            unsafe { SseD(std::array::from_fn(|h| _mm_loadu_pd(a.as_ptr().add(2 * h)))) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f64; 8] {
+            let mut a = [0.0f64; 8];
+            for h in 0..4 {
+                unsafe { _mm_storeu_pd(a.as_mut_ptr().add(2 * h), self.0[h]) };
+            }
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            each!(_mm_add_pd, self, o)
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            each!(_mm_sub_pd, self, o)
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            each!(_mm_mul_pd, self, o)
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            each!(_mm_div_pd, self, o)
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { SseD(std::array::from_fn(|h| _mm_sqrt_pd(self.0[h]))) }
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm_xor_pd, m, self)
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            let m = Self::splat(-0.0);
+            let sign = each!(_mm_and_pd, s, m);
+            let mag = each!(_mm_andnot_pd, m, self);
+            each!(_mm_or_pd, sign, mag)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            each!(_mm_cmple_pd, self, o)
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            each!(_mm_cmpge_pd, self, o)
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            each!(_mm_cmpeq_pd, self, o)
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            let x = each!(_mm_and_pd, m, a);
+            let y = each!(_mm_andnot_pd, m, b);
+            each!(_mm_or_pd, x, y)
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            let mut m = 0;
+            for h in 0..4 {
+                m |= (unsafe { _mm_movemask_pd(self.0[h]) } as u32) << (2 * h);
+            }
+            m
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx_d {
+    use std::arch::x86_64::*;
+
+    /// Two AVX registers of four f64; only used inside functions compiled with AVX.
+    #[derive(Clone, Copy)]
+    pub(super) struct AvxD(pub(super) [__m256d; 2]);
+
+    macro_rules! each {
+        ($f:ident, $a:expr, $b:expr) => {
+            unsafe { AvxD([$f($a.0[0], $b.0[0]), $f($a.0[1], $b.0[1])]) }
+        };
+    }
+
+    // SAFETY (every method): only called from `ranges8_avx`, compiled with
+    // AVX and reached only when the CPU has it; inlined there.
+    impl super::D8 for AvxD {
+        #[inline(always)]
+        fn splat(x: f64) -> Self {
+            unsafe { AvxD([_mm256_set1_pd(x); 2]) }
+        }
+        #[inline(always)]
+        fn load(a: &[f64; 8]) -> Self {
+            unsafe { AvxD([_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(a.as_ptr().add(4))]) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f64; 8] {
+            let mut a = [0.0f64; 8];
+            unsafe {
+                _mm256_storeu_pd(a.as_mut_ptr(), self.0[0]);
+                _mm256_storeu_pd(a.as_mut_ptr().add(4), self.0[1]);
+            }
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            each!(_mm256_add_pd, self, o)
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            each!(_mm256_sub_pd, self, o)
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            each!(_mm256_mul_pd, self, o)
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            each!(_mm256_div_pd, self, o)
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { AvxD([_mm256_sqrt_pd(self.0[0]), _mm256_sqrt_pd(self.0[1])]) }
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm256_xor_pd, m, self)
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            let m = Self::splat(-0.0);
+            let sign = each!(_mm256_and_pd, s, m);
+            let mag = each!(_mm256_andnot_pd, m, self);
+            each!(_mm256_or_pd, sign, mag)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            unsafe { AvxD([_mm256_cmp_pd::<_CMP_LE_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_LE_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            unsafe { AvxD([_mm256_cmp_pd::<_CMP_GE_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_GE_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            unsafe { AvxD([_mm256_cmp_pd::<_CMP_EQ_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_EQ_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            unsafe { AvxD([_mm256_blendv_pd(b.0[0], a.0[0], m.0[0]), _mm256_blendv_pd(b.0[1], a.0[1], m.0[1])]) }
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            unsafe { (_mm256_movemask_pd(self.0[0]) | _mm256_movemask_pd(self.0[1]) << 4) as u32 }
+        }
+    }
+}
+
+/// `kernels::ball` (f64, world units) for `o` relative to the centre:
+/// where the line meets the ball, and the range (f64).
+#[inline(always)]
+fn ball<D: D8>(o: &[D; 3], d: &[D; 3], r: f64) -> (D, D, D) {
+    let dot = |a: &[D; 3], b: &[D; 3]| a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]));
+    let a = dot(d, d);
+    let b = dot(o, d);
+    let s = b.div(a);
+    let f = [o[0].sub(d[0].mul(s)), o[1].sub(d[1].mul(s)), o[2].sub(d[2].mul(s))];
+    let rr = D::splat(r * r);
+    let disc = a.mul(rr.sub(dot(&f, &f)));
+    let zero = D::splat(0.0);
+    let hit = disc.ge(zero);
+    let c = dot(o, o).sub(rr);
+    let q = b.add(disc.sqrt().copysign(b)).neg();
+    let q0 = q.eq(zero);
+    let t0 = D::select(q0, zero, c.div(q));
+    let t1 = D::select(q0, zero, q.div(a));
+    let keep = t0.le(t1);
+    (hit, D::select(keep, t0, t1), D::select(keep, t1, t0))
+}
+
 /// A kernel's answer in lanes: where the line meets the solid, and the range.
 #[derive(Clone, Copy)]
 struct R8<V> {
@@ -497,7 +723,10 @@ impl LeafTable {
     /// Does leaf `i` have a packet kernel ([`LeafTable::ranges8`])?
     #[inline]
     pub fn has_kernel8(&self, i: u32) -> bool {
-        matches!(self.kind[i as usize], LeafKind::Sphere | LeafKind::Cuboid | LeafKind::Cylinder | LeafKind::HalfSpace)
+        matches!(
+            self.kind[i as usize],
+            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cuboid | LeafKind::Cylinder | LeafKind::HalfSpace
+        )
     }
 
     /// Per lane k of `lanes`, the unclipped range of leaf `i` (which must
@@ -512,7 +741,7 @@ impl LeafTable {
                 // SAFETY: the CPU has AVX.
                 return unsafe { self.ranges8_avx(i, rays, lanes, out) };
             }
-            self.ranges8_in::<sse::Sse>(i, rays, lanes, out)
+            self.ranges8_in::<sse::Sse, sse_d::SseD>(i, rays, lanes, out)
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
@@ -526,18 +755,21 @@ impl LeafTable {
     #[doc(hidden)]
     #[cfg(target_arch = "x86_64")]
     pub fn ranges8_sse(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
-        self.ranges8_in::<sse::Sse>(i, rays, lanes, out)
+        self.ranges8_in::<sse::Sse, sse_d::SseD>(i, rays, lanes, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     unsafe fn ranges8_avx(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
-        self.ranges8_in::<avx::Avx>(i, rays, lanes, out)
+        self.ranges8_in::<avx::Avx, avx_d::AvxD>(i, rays, lanes, out)
     }
 
     #[inline(always)]
-    fn ranges8_in<V: V8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+    fn ranges8_in<V: V8, D: D8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let iu = i as usize;
+        if self.kind[iu] == LeafKind::Sphere {
+            return self.balls8::<D>(iu, rays, lanes, out);
+        }
         let m = &self.to_local[iu];
         let anchor = self.anchor[iu];
         let col = |v: Vec3A| [v.x, v.y, v.z];
@@ -558,7 +790,7 @@ impl LeafTable {
         let in_range = V::splat(1.0 / DIR_SAFE_MAX).le(big).and(big.le(V::splat(DIR_SAFE_MAX)));
         let (p0, p1) = (self.p0[iu], self.p1[iu]);
         let r = match self.kind[iu] {
-            LeafKind::Sphere => sphere(&lo, &ld),
+            LeafKind::Ellipsoid => sphere(&lo, &ld),
             LeafKind::Cuboid => cuboid(&lo, &ld, [p0.x, p0.y, p0.z], [p1.x, p1.y, p1.z]),
             LeafKind::Cylinder => cylinder(&lo, &ld),
             LeafKind::HalfSpace => half_space(&lo, &ld, [p0.x, p0.y, p0.z], p0.w),
@@ -567,6 +799,31 @@ impl LeafTable {
         let done = in_range.bitmask() & lanes;
         *out =
             Ranges8 { done, hit: r.hit.bitmask() & done, t0: r.t0.store(), s0: r.s0.store_u32(), t1: r.t1.store(), s1: r.s1.store_u32() };
+    }
+
+    /// [`LeafTable::ranges8`] of a ball (`LeafKind::Sphere`), as the scalar
+    /// path's `ball_spans`: in f64 from the f32 world ray and the ball's f32
+    /// centre and radius (no map, no rescaling: every lane is done).
+    #[inline(always)]
+    fn balls8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        let anchor = self.anchor[iu];
+        let (p0, p1) = (self.p0[iu], self.p1[iu]);
+        let wide = |a: &[f32; 8]| D::load(&a.map(|x| x as f64));
+        // `ball_frame`: (p - anchor) - p1, in f64; the radius p0.x + p0.y.
+        let c = [anchor.x, anchor.y, anchor.z];
+        let e = [p1.x, p1.y, p1.z];
+        let o: [D; 3] = std::array::from_fn(|a| wide(&rays.o[a]).sub(D::splat(c[a] as f64)).sub(D::splat(e[a] as f64)));
+        let d: [D; 3] = std::array::from_fn(|a| wide(&rays.d[a]));
+        let (hit, t0, t1) = ball(&o, &d, p0.x as f64 + p0.y as f64);
+        let side = [sub::SIDE; 8];
+        *out = Ranges8 {
+            done: lanes,
+            hit: hit.bitmask() & lanes,
+            t0: t0.store().map(|t| t as f32),
+            s0: side,
+            t1: t1.store().map(|t| t as f32),
+            s1: side,
+        };
     }
 }
 
