@@ -21,6 +21,7 @@ use rothray_csg::{NodeKind, ProgramBuilder};
 use rothray_primitives::{Aabb, LeafKind, LeafTable};
 
 use crate::bake::{
+    BIG_BAKE,
     bake_objects, build_object_tree, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, BakeSettings,
     Baked, Slice,
 };
@@ -91,6 +92,10 @@ pub(crate) fn sync_live(world: &World, scope: Scope, scene: &mut RenderScene) ->
     let changes = detect_changes(world, if full { Scope::All } else { scope }, &mut live.snaps);
     let result = if full {
         drop(changes); // 8 bytes per entity, at the peak of a first bake
+        if world.len() as usize >= BIG_BAKE {
+            // The scan's freed blocks, before a large bake's peak.
+            rothray_primitives::trim::release_free_memory();
+        }
         bake_all(world, scene, &mut live, settings).map(|_| true)
     } else if changes.dirty.is_empty() {
         Ok(false)
@@ -372,7 +377,6 @@ fn copy_leaves(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
         put(&mut dst.anchor, b, src.anchor[a]);
         put(&mut dst.p0, b, src.p0[a]);
         put(&mut dst.p1, b, src.p1[a]);
-        put(&mut dst.bounds, b, src.bounds[a]);
         put(&mut dst.ext, b, ext as u32);
         put(&mut scene.leaf_info, b, baked.leaf_info[a].clone());
     }
