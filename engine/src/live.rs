@@ -21,9 +21,8 @@ use rothray_csg::{NodeKind, ProgramBuilder};
 use rothray_primitives::{Aabb, LeafKind, LeafTable};
 
 use crate::bake::{
-    BIG_BAKE,
     bake_objects, build_object_tree, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, BakeSettings,
-    Baked, Slice,
+    Baked, Slice, BIG_BAKE,
 };
 use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;

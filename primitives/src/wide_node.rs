@@ -59,9 +59,8 @@ impl WideTrees {
                 packet.reserve(nn + more(nn), nl + more(nl), ni + more(ni));
             }
             roots.push(packet.push_part(t.packet));
-            // The part's build scratch (some 24 MB) goes back to the system
-            // (glibc kept it: 29 bytes per leaf at the peak of a union of
-            // 10^6 spheres' bake).
+            // The part's build scratch (some 24 MB for 65 536 boxes) goes
+            // back to the system: glibc would keep it to the end of the bake.
             crate::trim::release_free_memory();
         }
         drop(order);
