@@ -7,6 +7,7 @@
 //! cargo run --release --example live                       # 10 000 objects, 100 moving, 100 frames
 //! cargo run --release --example live -- --objects 100000 --moving 1
 //! cargo run --release --example live -- --frames 1000      # and the trace speed after them
+//! cargo run --release --example live -- --meshes 4         # and 4 instances of one cube mesh
 //! cargo run --release --example live -- --union 1000000    # memory: one union of N spheres
 //! cargo run --release --example live -- --union 1000000 --static 1   # the same by bake_scene
 //! ```
@@ -25,12 +26,14 @@ struct Args {
     moving: usize,
     frames: usize,
     union: usize,
+    /// Instances of one mesh asset among the objects.
+    meshes: usize,
     /// `--static 1`: the union baked by `bake_scene` (no sync state).
     fixed: bool,
 }
 
 fn parse_args() -> Args {
-    let mut a = Args { objects: 10_000, moving: 100, frames: 100, union: 0, fixed: false };
+    let mut a = Args { objects: 10_000, moving: 100, frames: 100, union: 0, meshes: 0, fixed: false };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     for pair in argv.chunks(2) {
         let v = pair.get(1).and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{}: a number please", pair[0]));
@@ -40,6 +43,7 @@ fn parse_args() -> Args {
             "--frames" => a.frames = v,
             "--union" => a.union = v,
             "--static" => a.fixed = v != 0,
+            "--meshes" => a.meshes = v,
             o => panic!("unknown option {o}"),
         }
     }
@@ -88,7 +92,8 @@ fn rss() -> (u64, u64) {
 fn live(a: &Args) {
     let mut rng = SmallRng::seed_from_u64(13);
     let mut world = World::new();
-    let roots = spawn_objects(&mut world, a.objects, &mut rng);
+    let mut roots = spawn_objects(&mut world, a.objects, &mut rng);
+    roots.extend(spawn_meshes(&mut world, a.meshes, extent(a.objects), &mut rng));
     let mut scene = RenderScene::default();
     let t = Instant::now();
     sync_scene(&mut world, &mut scene).unwrap();
@@ -172,6 +177,33 @@ fn trace_speed(world: &World, scene: &RenderScene, rng: &mut SmallRng) {
     let (tf, nf) = time(&fresh);
     assert_eq!(nl, nf, "the live scene and a fresh bake hit as often");
     println!("20 000 picks (best of 3): live scene {tl:.1} ms, fresh bake {tf:.1} ms ({:.2}x)", tl / tf);
+}
+
+/// `n` instances of one cube mesh (imported once, shared), scattered over
+/// `side`.
+fn spawn_meshes(world: &mut World, n: usize, side: f32, rng: &mut SmallRng) -> Vec<Entity> {
+    let p: Vec<Vec3> = (0..8).map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32) - 0.5).collect();
+    let t = vec![
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    let mesh = std::sync::Arc::new(MeshData::new(p, t, InsideRule::Winding).expect("a cube"));
+    (0..n)
+        .map(|_| {
+            let at = Vec3::new(rng.gen_range(0.0..side), rng.gen_range(0.0..side), rng.gen_range(0.0..side));
+            world.spawn((Transform::from_translation(at), MeshSolid(mesh.clone())))
+        })
+        .collect()
 }
 
 /// Memory: one union of `n` spheres, baked once (by `sync_scene`, or by

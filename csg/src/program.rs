@@ -379,15 +379,21 @@ impl<'a> ProgramBuilder<'a> {
         ProgramBuilder { program: Program::default(), leaves }
     }
 
-    /// Adds a leaf node for leaf `leaf`.
+    /// Adds a leaf node for leaf `leaf` (its bounds from the leaf table).
     pub fn leaf(&mut self, leaf: u32) -> u32 {
+        self.leaf_with_bounds(leaf, self.leaves.bounds[leaf as usize])
+    }
+
+    /// Adds a leaf node for leaf `leaf` whose bounds are `bounds` (a bake
+    /// moves the leaf table's bounds out and keeps one copy, the program's).
+    pub fn leaf_with_bounds(&mut self, leaf: u32, bounds: Aabb) -> u32 {
         let p = &mut self.program;
         let id = p.kind.len() as u32;
         p.kind.push(NodeKind::Leaf);
         p.first.push(leaf);
         p.count.push(0);
         p.wide.push(u32::MAX);
-        p.bounds.push(self.leaves.bounds[leaf as usize]);
+        p.bounds.push(bounds);
         p.leafy.push(false);
         id
     }

@@ -22,7 +22,7 @@ use rothray_primitives::{Aabb, LeafKind, LeafTable};
 
 use crate::bake::{
     bake_objects, build_object_tree, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, BakeSettings,
-    Baked, Slice,
+    Baked, Slice, BIG_BAKE,
 };
 use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;
@@ -91,6 +91,10 @@ pub(crate) fn sync_live(world: &World, scope: Scope, scene: &mut RenderScene) ->
     let changes = detect_changes(world, if full { Scope::All } else { scope }, &mut live.snaps);
     let result = if full {
         drop(changes); // 8 bytes per entity, at the peak of a first bake
+        if world.len() as usize >= BIG_BAKE {
+            // The scan's freed blocks, before a large bake's peak.
+            rothray_primitives::trim::release_free_memory();
+        }
         bake_all(world, scene, &mut live, settings).map(|_| true)
     } else if changes.dirty.is_empty() {
         Ok(false)
@@ -138,17 +142,13 @@ fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, ch
         by_index.sort_unstable();
         by_index.into_iter().map(|(_, r)| r).collect()
     };
-    // Many objects, meshes (the packet path's tables are made over the whole
-    // scene) or many dead rows: bake everything.
+    // Many objects or many dead rows: bake everything.
     let many = todo.len() > FULL_MIN && todo.len() * 2 > scene.objects.len();
     let sweep = live.dead_leaves > SWEEP_MIN && live.dead_leaves > scene.leaves.len() - live.dead_leaves;
-    if many || sweep || !scene.leaves.meshes.is_empty() {
+    if many || sweep {
         return bake_all(world, scene, live, live.settings);
     }
     let baked = bake_objects(world, &todo, live.settings)?;
-    if !baked.leaves.meshes.is_empty() {
-        return bake_all(world, scene, live, live.settings);
-    }
     live.counts.partial += 1;
     if changes.structural {
         place_objects(world, scene, live, &baked, &roots);
@@ -211,6 +211,7 @@ fn replace_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState,
         let old = live.slices[oi as usize];
         let (info, slice) = rebake_object(world, scene, live, baked, k, oi, Some(old));
         let old_bounds = std::mem::replace(&mut scene.objects[oi as usize], info).bounds;
+        scene.redo_window[oi as usize] = redo_window_of(&scene.program, &scene.leaves, &scene.objects[oi as usize]);
         if !same_box(&old_bounds, &scene.objects[oi as usize].bounds) {
             moved.push((oi, old_bounds));
         }
@@ -372,7 +373,6 @@ fn copy_leaves(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
         put(&mut dst.anchor, b, src.anchor[a]);
         put(&mut dst.p0, b, src.p0[a]);
         put(&mut dst.p1, b, src.p1[a]);
-        put(&mut dst.bounds, b, src.bounds[a]);
         put(&mut dst.ext, b, ext as u32);
         put(&mut scene.leaf_info, b, baked.leaf_info[a].clone());
     }
@@ -443,11 +443,19 @@ fn update_scene_bounds(scene: &mut RenderScene) {
     set_scene_bounds(scene, bounds);
 }
 
-/// The packet path's tables for a scene without meshes (scenes with meshes
-/// are baked in full): no packet meshes, no cover, no shortcut, as
-/// `bake_packet_paths` makes them.
+/// The packet path's tables. Without meshes: no packet meshes, no cover, no
+/// shortcut, as `bake_packet_paths` makes them. With meshes (the mesh
+/// assets are shared, not re-baked): `bake_packet_paths` again, over the
+/// whole scene (a pass over its objects' trees and, below
+/// `SHORTCUT_LEAVES`, its leaves; no BVH is built). Dead rows may keep a
+/// live scene from the shortcut that a fresh bake takes: the shortcut only
+/// skips work, the answers are the same.
 fn update_packet_paths(scene: &mut RenderScene) {
-    scene.packet_meshes.clear();
-    scene.packet_cover = scene.objects.is_empty().then(Vec::new);
-    scene.shortcut = None;
+    if scene.leaves.meshes.is_empty() {
+        scene.packet_meshes.clear();
+        scene.packet_cover = scene.objects.is_empty().then(Vec::new);
+        scene.shortcut = None;
+    } else {
+        crate::packet::bake_packet_paths(scene);
+    }
 }

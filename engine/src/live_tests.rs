@@ -423,3 +423,80 @@ fn live_refits_many_objects_like_a_fresh_bake() {
     println!("{c:?}");
     assert!(c.partial >= 60 && c.in_place > 0 && c.appended > 0 && c.rebuilds > 0, "every path ran: {c:?}");
 }
+
+/// A mesh object: the shared asset under a random scale, turn and place,
+/// alone or minus an analytic leaf.
+fn spawn_mesh_object(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> Entity {
+    let turn = glam::DQuat::from_rotation_y(rng.gen_range(0.0..6.0));
+    let place = v3(rng, 7.0).as_dvec3();
+    let m = world.spawn((MeshSolid(mesh.clone()),));
+    let (root, local) = if rng.gen_bool(0.5) {
+        let s = spawn_leaf(world, rng, 0.6);
+        (world.spawn((CsgNode::difference([m, s]),)), DAffine3::from_scale(DVec3::splat(rng.gen_range(1.0..2.5))))
+    } else {
+        (m, DAffine3::IDENTITY)
+    };
+    world.insert_one(m, Transform(local)).unwrap();
+    world.insert_one(root, Transform(DAffine3::from_rotation_translation(turn, place) * local)).unwrap();
+    root
+}
+
+/// Scenes with meshes sync object by object: mesh objects (one asset,
+/// shared by every instance) move, appear and vanish, analytic objects
+/// move, and each sync re-bakes only those objects and answers as a fresh
+/// bake does (hits, spans, classification, the renderer's packets; a
+/// small world takes the packet shortcut).
+#[test]
+fn live_meshes_sync_by_object_like_a_fresh_bake() {
+    let seed = seed_from_env(1331);
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mesh = cube_mesh();
+    let mut total = LiveCounts::default();
+    for (world_no, others) in [(0, 2), (1, 14)] {
+        let mut world = World::new();
+        let mut meshes: Vec<Entity> = (0..2).map(|_| spawn_mesh_object(&mut world, &mut rng, &mesh)).collect();
+        let plain: Vec<Entity> = (0..others).map(|_| spawn_leaf(&mut world, &mut rng, 7.0)).collect();
+        let mut scene = RenderScene::default();
+        sync_scene(&mut world, &mut scene).unwrap();
+        let mut shortcut = 0;
+        for step in 0..60 {
+            let what = match rng.gen_range(0..5) {
+                0 | 1 => {
+                    let r = meshes[rng.gen_range(0..meshes.len())];
+                    let t = world.get::<&Transform>(r).unwrap().0;
+                    world.insert_one(r, Transform(DAffine3::from_translation(v3(&mut rng, 2.0).as_dvec3()) * t)).unwrap();
+                    "move mesh"
+                }
+                2 if meshes.len() < PACKET_MESHES => {
+                    meshes.push(spawn_mesh_object(&mut world, &mut rng, &mesh));
+                    "add mesh"
+                }
+                2 | 3 if meshes.len() > 1 => {
+                    let r = meshes.swap_remove(rng.gen_range(0..meshes.len()));
+                    despawn_tree(&mut world, r, &mut Vec::new());
+                    "remove mesh"
+                }
+                _ => {
+                    let r = plain[rng.gen_range(0..plain.len())];
+                    world.insert_one(r, Transform::from_translation(v3(&mut rng, 7.0))).unwrap();
+                    "move other"
+                }
+            };
+            let what = format!("seed {seed} world {world_no} step {step} {what}");
+            assert!(sync_scene(&mut world, &mut scene).unwrap(), "{what}: synced");
+            assert!(!scene.leaves.meshes.is_empty(), "{what}: a scene with meshes");
+            shortcut += scene.shortcut.is_some() as u32;
+            let fresh = RenderScene::from_world(&world).unwrap();
+            compare(&scene, &fresh, &mut rng, &what);
+            if step % 4 == 0 {
+                compare_pictures(&scene, &fresh, &what);
+            }
+        }
+        let c = scene.live.as_ref().unwrap().counts;
+        println!("world {world_no}: {c:?}, shortcut in {shortcut} syncs");
+        assert_eq!(c.full, 1, "world {world_no}: only the first sync bakes everything: {c:?}");
+        assert!(world_no > 0 || shortcut > 0, "the small world takes the packet shortcut");
+        add_counts(&mut total, c);
+    }
+    assert!(total.in_place > 0 && total.appended > 0, "every path ran: {total:?}");
+}

@@ -228,7 +228,7 @@ pub(crate) fn bake_packet_paths(scene: &mut RenderScene) {
         None
     } else {
         let rest: Vec<u32> = (0..scene.leaves.len() as u32).filter(|l| !pm.contains(l)).collect();
-        let others: Vec<Aabb> = rest.iter().map(|&l| scene.leaves.bounds[l as usize]).collect();
+        let others: Vec<Aabb> = scene.leaf_bounds(&rest);
         let exact: Vec<u32> = rest
             .iter()
             .map(|&l| {

@@ -126,6 +126,18 @@ struct ObjRef<'a> {
 }
 
 impl RenderScene {
+    /// The world bounds of the leaves `leaves` (rows of the leaf table),
+    /// read from their program nodes: the bake keeps the leaves' bounds
+    /// there only.
+    pub fn leaf_bounds(&self, leaves: &[u32]) -> Vec<Aabb> {
+        let p = &self.program;
+        let mut node_of = vec![u32::MAX; self.leaves.len()];
+        for n in (0..p.kind.len()).filter(|&n| p.kind[n] == rothray_csg::NodeKind::Leaf) {
+            node_of[p.first[n] as usize] = n as u32;
+        }
+        leaves.iter().map(|&l| p.bounds[node_of[l as usize] as usize]).collect()
+    }
+
     /// The per-ray context: the fusing tolerance grows with the distance from the
     /// scene, since f32 rounding of the crossings does.
     #[inline]

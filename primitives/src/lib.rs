@@ -33,6 +33,7 @@ pub mod quartic;
 pub mod ray;
 pub mod sweep;
 pub mod table;
+pub mod trim;
 pub mod wide_node;
 
 pub use aabb::Aabb;

@@ -487,7 +487,9 @@ pub struct LeafTable {
     pub p0: Vec<Vec4>,
     /// Kind-specific parameters.
     pub p1: Vec<Vec4>,
-    /// World bounds per leaf.
+    /// World bounds per leaf, as pushed. A bake moves them into its CSG
+    /// program (each leaf node's bounds) and leaves this empty: one copy,
+    /// 24 bytes per leaf.
     pub bounds: Vec<Aabb>,
     /// Index into the kind's own table (sweeps, gcyls, meshes); 0 for analytic leaves.
     pub ext: Vec<u32>,
