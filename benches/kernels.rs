@@ -139,7 +139,8 @@ fn leaf_kernels(c: &mut Criterion) {
     for i in 0..leaves.len() as u32 {
         let kind = leaves.kind[i as usize];
         // A half-space is unbounded: aim at the unit box around its anchor.
-        let b = if kind == LeafKind::HalfSpace { Aabb::new(Vec3::splat(-1.0), Vec3::ONE) } else { leaves.bounds[i as usize] };
+        // (A baked scene keeps leaf bounds in its program: `leaf_bounds`.)
+        let b = if kind == LeafKind::HalfSpace { Aabb::new(Vec3::splat(-1.0), Vec3::ONE) } else { scene.leaf_bounds(&[i])[0] };
         let rays = rays_at(&mut rng, &b, LEAF_RAYS);
         let hits = rays
             .iter()
