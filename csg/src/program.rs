@@ -279,7 +279,7 @@ fn leaf_spans<S: SpanSink + ?Sized>(
             if let Some(v) = memo.leaf_lane(leaves, i, k, (lo, hi), out) {
                 return v;
             }
-        } else if nearest.is_some() {
+        } else if nearest.is_some() && memo.len > 0 {
             if let Some(v) = memo.serve(k, i, lo, hi, out) {
                 return v;
             }
