@@ -390,11 +390,11 @@ fn torus_ratio_stats(ratio: f64, seed: u64) -> Stats {
 
 /// Tori over the supported minor-to-major ratios (`TORUS_RATIO`, 1e-4 to
 /// 1e20), viewed from 4 tube radii (thin) or 4 sizes (fat): no wrong span
-/// count once chords under 1e-4 of the view are set aside; thin tubes' ends
-/// within 3e-6 of the major radius (the kernel works in its units, in an f32
-/// map: 2.6e-3 of the view at 1e-4), fat ones within 1e-5 of the view.
-/// Below the range it fails: at 1e-5 a wrong count and 1.2e-2 of the view,
-/// at 1e-8 half the rays miss the tube.
+/// count once chords under 1e-4 of the view are set aside, and every end
+/// within 1e-5 of the view (the target). Thin tubes meet it since
+/// rays are mapped to the torus's frame in f64: through the f32 map (6e-8
+/// of the major radius) the ends were off by 2.6e-3 of the view at 1e-4,
+/// and at 1e-5 with a wrong count.
 #[test]
 fn torus_ratios() {
     let seed = 0x70_0000u64;
@@ -405,7 +405,7 @@ fn torus_ratios() {
         let of_major = st.max_err * 4.0 * ratio;
         let also = if ratio < 1.0 { format!(" ({of_major:.1e} of the major radius)") } else { String::new() };
         println!("ratio {ratio:e}: max end error {:.1e} of the view{also}, wrong counts {} of {}", st.max_err, st.topo, st.rays);
-        let ok = st.topo == 0 && if ratio < 1.0 { of_major <= 3e-6 } else { st.max_err <= 1e-5 };
+        let ok = st.topo == 0 && st.max_err <= 1e-5;
         if !ok {
             bad.push(ratio);
         }

@@ -366,6 +366,10 @@ fn copy_leaves(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
                     }
                 }
             }
+            LeafKind::Torus => {
+                dst.torus_maps.push(src.torus_maps[src.ext[a] as usize]);
+                dst.torus_maps.len() - 1
+            }
             _ => 0,
         };
         put(&mut dst.kind, b, src.kind[a]);

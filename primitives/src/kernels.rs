@@ -287,13 +287,18 @@ pub const TORUS_TOLERANCE: f32 = 1e-6;
 /// `1 + rho` (relative to the torus' size; 0 polishes to full f64 precision, the default):
 /// `shape` is `(rho, tol)`. The `torus` knob of `rothray bench --knob`.
 pub fn torus_tol(o: Vec3, d: Vec3, shape: (f32, f64), out: &mut [(f32, f32); 3]) -> usize {
+    torus_tol64(o.as_dvec3(), d.as_dvec3(), shape, out)
+}
+
+/// [`torus_tol`] for a line given in f64 (the leaf table maps a torus's rays
+/// in f64: see [`crate::LeafTable::spans_in`]).
+pub fn torus_tol64(o: DVec3, d: DVec3, shape: (f32, f64), out: &mut [(f32, f32); 3]) -> usize {
     let (rho, tol) = (shape.0 as f64, shape.1);
-    let o = o.as_dvec3();
-    let dl = d.as_dvec3().length();
+    let dl = d.length();
     if !(dl > 0.0) {
         return 0;
     }
-    let dn = d.as_dvec3() / dl;
+    let dn = d / dl;
     let tc = -o.dot(dn);
     let oc = o + dn * tc;
     let rb = 1.0 + rho;

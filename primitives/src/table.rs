@@ -392,13 +392,12 @@ pub const MIN_SIZE: f64 = 1e-30;
 
 const RANGE_SLACK: f64 = 1.0 + 1e-6;
 
-/// The supported range of a torus's minor-to-major radius ratio. Thinner
-/// tori lose the tube: the kernel works in units of the major radius, and
-/// its f32 local map and ray (6e-8 of the major radius) are ~1e-6 of it
-/// after the quartic (tests/stress.rs `torus_ratios`: span ends within
-/// 2.6e-3 of a view of 4 tube radii at 1e-4, 1.2e-2 and wrong span counts at
-/// 1e-5, a tube of 1e-8 is missed on half the rays). Fatter tori than 1e20
-/// are measured no further (and are spheres to f64 precision).
+/// The supported range of a torus's minor-to-major radius ratio, as far as
+/// it is measured (tests/stress.rs `torus_ratios`: with rays mapped to the
+/// torus's frame in f64, span ends within 4.9e-6 of a view of 4 tube radii
+/// at 1e-4, 1.6e-7 at 1e-3; through the former f32 map they were 2.6e-3 at
+/// 1e-4, with wrong counts at 1e-5). Fatter tori than 1e20 are measured no
+/// further (and are spheres to f64 precision).
 pub const TORUS_RATIO: (f64, f64) = (1e-4, 1e20);
 
 /// Checks the sizes of a leaf's own parameters that the map's axes do not
@@ -499,6 +498,9 @@ pub struct LeafTable {
     pub gcyls: Vec<Arc<GenCylData>>,
     /// Distinct meshes (a mesh under many transforms is stored once).
     pub meshes: Vec<Arc<MeshData>>,
+    /// Per torus (indexed by `ext`), its world-to-local map in f64: the
+    /// linear part and the anchor's local point (see [`LeafTable::spans_in`]).
+    pub torus_maps: Vec<(DMat3, DVec3)>,
     /// Polish tolerance of the torus roots (see [`kernels::torus_tol`]; 0, the
     /// default, is full f64 precision).
     pub torus_tol: f64,
@@ -525,6 +527,7 @@ impl LeafTable {
         self.sweeps.clear();
         self.gcyls.clear();
         self.meshes.clear();
+        self.torus_maps.clear();
     }
 
     /// The f32 world-to-local map of `world_from_local` relative to `anchor`
@@ -652,7 +655,15 @@ impl LeafTable {
         self.p0.push(p0);
         self.p1.push(p1);
         self.bounds.push(bounds);
-        self.ext.push(0);
+        let mut ext = 0;
+        if kind == LeafKind::Torus {
+            // The f64 map of the tube: the f32 one (6e-8 of the major
+            // radius) moved a thin tube's surface by a large part of it.
+            let inv = m.inverse();
+            self.torus_maps.push((inv.matrix3, inv.transform_point3(anchor.as_dvec3())));
+            ext = self.torus_maps.len() - 1;
+        }
+        self.ext.push(ext as u32);
         Ok(i)
     }
 
@@ -675,6 +686,9 @@ impl LeafTable {
         if self.kind[iu] == LeafKind::Sphere {
             return self.ball_spans(i, ray, (tmin, tmax), out);
         }
+        if self.kind[iu] == LeafKind::Torus {
+            return self.torus_spans(i, ray, (tmin, tmax), out);
+        }
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
         let ld = m.transform_vector3(d);
@@ -693,6 +707,28 @@ impl LeafTable {
     fn ball_frame(&self, iu: usize, p: Vec3) -> (DVec3, f64) {
         let q = (p.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) - self.p1[iu].truncate().as_dvec3();
         (q, self.p0[iu].x as f64 + self.p0[iu].y as f64)
+    }
+
+    /// The local point of world point `p` in torus `iu`'s frame, in f64.
+    #[inline(always)]
+    fn torus_local(&self, iu: usize, p: Vec3) -> DVec3 {
+        let (m, b) = &self.torus_maps[self.ext[iu] as usize];
+        *m * (p.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) + *b
+    }
+
+    /// The spans of torus `i` along the world ray, its line mapped to the
+    /// torus's frame in f64 (a direction of any f32 length needs no
+    /// rescaling there).
+    #[inline(always)]
+    fn torus_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
+        let iu = i as usize;
+        let lo = self.torus_local(iu, ray.origin);
+        let ld = self.torus_maps[self.ext[iu] as usize].0 * ray.dir.as_dvec3();
+        let mut buf = [(0.0f32, 0.0f32); 3];
+        let n = kernels::torus_tol64(lo, ld, (self.p0[iu].x, self.torus_tol), &mut buf);
+        for &(a, b) in &buf[..n] {
+            push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, tmin, tmax);
+        }
     }
 
     /// The spans of ball `i` (kind [`LeafKind::Sphere`]) along the world ray.
@@ -883,6 +919,9 @@ impl LeafTable {
             let (q, r) = self.ball_frame(iu, p);
             return q.length_squared() <= r * r;
         }
+        if self.kind[iu] == LeafKind::Torus {
+            return kernels::torus_contains(self.torus_local(iu, p), self.p0[iu].x as f64);
+        }
         let l = self.local_point(iu, p);
         let p0 = self.p0[iu];
         match self.kind[iu] {
@@ -910,6 +949,14 @@ impl LeafTable {
         if self.kind[iu] == LeafKind::Sphere {
             let (q, _) = self.ball_frame(iu, o);
             return (q + d.as_dvec3() * t as f64).try_normalize().map_or(Vec3::Y, |n| n.as_vec3());
+        }
+        if self.kind[iu] == LeafKind::Torus {
+            // In f64, as its spans: the tube of a thin torus is a small
+            // difference of local points.
+            let m = &self.torus_maps[self.ext[iu] as usize].0;
+            let l = self.torus_local(iu, o) + *m * d.as_dvec3() * t as f64;
+            let xy = DVec3::new(l.x, l.y, 0.0).try_normalize().unwrap_or(DVec3::X);
+            return (m.transpose() * (l - xy)).try_normalize().map_or(Vec3::Y, |n| n.as_vec3());
         }
         let m = &self.to_local[iu];
         let p0 = self.p0[iu];
