@@ -31,6 +31,7 @@ pub mod poly;
 pub mod polytope;
 pub mod quartic;
 pub mod ray;
+mod simd8;
 pub mod sweep;
 pub mod table;
 pub mod trim;

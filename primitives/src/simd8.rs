@@ -1,0 +1,489 @@
+#![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+//! Eight SIMD lanes of f32 ([`V8`]) and of f64 ([`D8`]) for the packet
+//! kernels ([`crate::kernels8`]): one AVX register (two for f64) where the
+//! CPU has it, SSE2 registers otherwise, behind one set of operations, so
+//! that each kernel is written once and both builds do the same IEEE
+//! operations per lane. The AVX types are only used inside functions
+//! compiled with AVX (`#[target_feature(enable = "avx")]`), chosen at run
+//! time.
+
+/// The 8-lane float operations the kernels use; a mask is a vector whose
+/// lanes are all ones (true) or all zeros.
+pub(crate) trait V8: Copy {
+    fn splat(x: f32) -> Self;
+    fn load(a: &[f32; 8]) -> Self;
+    fn store(self) -> [f32; 8];
+    /// Lanes holding small whole numbers, as integers.
+    fn store_u32(self) -> [u32; 8];
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+    fn mul(self, o: Self) -> Self;
+    fn div(self, o: Self) -> Self;
+    fn sqrt(self) -> Self;
+    fn abs(self) -> Self;
+    fn neg(self) -> Self;
+    /// `self` with the sign bit of `s` (`f32::copysign`).
+    fn copysign(self, s: Self) -> Self;
+    fn max(self, o: Self) -> Self;
+    fn le(self, o: Self) -> Self;
+    fn lt(self, o: Self) -> Self;
+    fn ge(self, o: Self) -> Self;
+    fn gt(self, o: Self) -> Self;
+    fn eq(self, o: Self) -> Self;
+    fn and(self, o: Self) -> Self;
+    fn or(self, o: Self) -> Self;
+    /// `!self & o`, bitwise.
+    fn andnot(self, o: Self) -> Self;
+    /// `self & !m`: lanes of `self` where `m` is false.
+    #[inline(always)]
+    fn unless(self, m: Self) -> Self {
+        m.andnot(self)
+    }
+    /// Lanes of `a` where `m`, else of `b`.
+    fn select(m: Self, a: Self, b: Self) -> Self;
+    fn bitmask(self) -> u32;
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod sse {
+    use std::arch::x86_64::*;
+
+    /// Two SSE2 halves (every x86_64 CPU has SSE2).
+    #[derive(Clone, Copy)]
+    pub(crate) struct Sse(pub(crate) [__m128; 2]);
+
+    macro_rules! each {
+        ($f:ident, $a:expr, $b:expr) => {
+            unsafe { Sse([$f($a.0[0], $b.0[0]), $f($a.0[1], $b.0[1])]) }
+        };
+    }
+
+    // SAFETY (every method): SSE2 is part of x86_64.
+    impl super::V8 for Sse {
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            unsafe { Sse([_mm_set1_ps(x); 2]) }
+        }
+        #[inline(always)]
+        fn load(a: &[f32; 8]) -> Self {
+            unsafe { Sse([_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(a.as_ptr().add(4))]) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            unsafe {
+                _mm_storeu_ps(a.as_mut_ptr(), self.0[0]);
+                _mm_storeu_ps(a.as_mut_ptr().add(4), self.0[1]);
+            }
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe {
+                _mm_storeu_si128(a.as_mut_ptr() as *mut __m128i, _mm_cvttps_epi32(self.0[0]));
+                _mm_storeu_si128(a.as_mut_ptr().add(4) as *mut __m128i, _mm_cvttps_epi32(self.0[1]));
+            }
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            each!(_mm_add_ps, self, o)
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            each!(_mm_sub_ps, self, o)
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            each!(_mm_mul_ps, self, o)
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            each!(_mm_div_ps, self, o)
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { Sse([_mm_sqrt_ps(self.0[0]), _mm_sqrt_ps(self.0[1])]) }
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm_andnot_ps, m, self)
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm_xor_ps, m, self)
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            let m = Self::splat(-0.0);
+            let sign = each!(_mm_and_ps, s, m);
+            let mag = each!(_mm_andnot_ps, m, self);
+            each!(_mm_or_ps, sign, mag)
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            each!(_mm_max_ps, self, o)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            each!(_mm_cmple_ps, self, o)
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> Self {
+            each!(_mm_cmplt_ps, self, o)
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            each!(_mm_cmpge_ps, self, o)
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            each!(_mm_cmpgt_ps, self, o)
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            each!(_mm_cmpeq_ps, self, o)
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            each!(_mm_and_ps, self, o)
+        }
+        #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            each!(_mm_or_ps, self, o)
+        }
+        #[inline(always)]
+        fn andnot(self, o: Self) -> Self {
+            each!(_mm_andnot_ps, self, o)
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            // (m & a) | (!m & b): SSE2 has no blend.
+            let x = each!(_mm_and_ps, m, a);
+            let y = each!(_mm_andnot_ps, m, b);
+            each!(_mm_or_ps, x, y)
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            unsafe { (_mm_movemask_ps(self.0[0]) | _mm_movemask_ps(self.0[1]) << 4) as u32 }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod avx {
+    use std::arch::x86_64::*;
+
+    /// One AVX register; only used inside functions compiled with AVX.
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx(pub(crate) __m256);
+
+    // SAFETY (every method): only called from `LeafTable::ranges8_avx` (kernels8.rs), compiled with
+    // AVX and reached only when the CPU has it; inlined there.
+    impl super::V8 for Avx {
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            unsafe { Avx(_mm256_set1_ps(x)) }
+        }
+        #[inline(always)]
+        fn load(a: &[f32; 8]) -> Self {
+            unsafe { Avx(_mm256_loadu_ps(a.as_ptr())) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe { _mm256_storeu_si256(a.as_mut_ptr() as *mut __m256i, _mm256_cvttps_epi32(self.0)) };
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_add_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_sub_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_mul_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_div_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { Avx(_mm256_sqrt_ps(self.0)) }
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            unsafe { Avx(_mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0)) }
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            unsafe { Avx(_mm256_xor_ps(_mm256_set1_ps(-0.0), self.0)) }
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            unsafe {
+                let m = _mm256_set1_ps(-0.0);
+                Avx(_mm256_or_ps(_mm256_and_ps(s.0, m), _mm256_andnot_ps(m, self.0)))
+            }
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_max_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_LE_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_LT_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_GE_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_GT_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_and_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_or_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn andnot(self, o: Self) -> Self {
+            unsafe { Avx(_mm256_andnot_ps(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            unsafe { Avx(_mm256_blendv_ps(b.0, a.0, m.0)) }
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            unsafe { _mm256_movemask_ps(self.0) as u32 }
+        }
+    }
+}
+
+/// The 8-lane f64 operations of the ball kernel (as [`V8`]; masks are all
+/// ones or all zeros per lane).
+pub(crate) trait D8: Copy {
+    fn splat(x: f64) -> Self;
+    fn load(a: &[f64; 8]) -> Self;
+    fn store(self) -> [f64; 8];
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+    fn mul(self, o: Self) -> Self;
+    fn div(self, o: Self) -> Self;
+    fn sqrt(self) -> Self;
+    fn neg(self) -> Self;
+    fn copysign(self, s: Self) -> Self;
+    fn le(self, o: Self) -> Self;
+    fn ge(self, o: Self) -> Self;
+    fn eq(self, o: Self) -> Self;
+    fn select(m: Self, a: Self, b: Self) -> Self;
+    fn bitmask(self) -> u32;
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod sse_d {
+    use std::arch::x86_64::*;
+
+    /// Four SSE2 pairs.
+    #[derive(Clone, Copy)]
+    pub(crate) struct SseD(pub(crate) [__m128d; 4]);
+
+    macro_rules! each {
+        ($f:ident, $a:expr, $b:expr) => {
+            unsafe { SseD(std::array::from_fn(|h| $f($a.0[h], $b.0[h]))) }
+        };
+    }
+
+    // SAFETY (every method): SSE2 is part of x86_64.
+    impl super::D8 for SseD {
+        #[inline(always)]
+        fn splat(x: f64) -> Self {
+            unsafe { SseD([_mm_set1_pd(x); 4]) }
+        }
+        #[inline(always)]
+        fn load(a: &[f64; 8]) -> Self {
+            unsafe { SseD(std::array::from_fn(|h| _mm_loadu_pd(a.as_ptr().add(2 * h)))) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f64; 8] {
+            let mut a = [0.0f64; 8];
+            for h in 0..4 {
+                unsafe { _mm_storeu_pd(a.as_mut_ptr().add(2 * h), self.0[h]) };
+            }
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            each!(_mm_add_pd, self, o)
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            each!(_mm_sub_pd, self, o)
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            each!(_mm_mul_pd, self, o)
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            each!(_mm_div_pd, self, o)
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { SseD(std::array::from_fn(|h| _mm_sqrt_pd(self.0[h]))) }
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm_xor_pd, m, self)
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            let m = Self::splat(-0.0);
+            let sign = each!(_mm_and_pd, s, m);
+            let mag = each!(_mm_andnot_pd, m, self);
+            each!(_mm_or_pd, sign, mag)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            each!(_mm_cmple_pd, self, o)
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            each!(_mm_cmpge_pd, self, o)
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            each!(_mm_cmpeq_pd, self, o)
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            let x = each!(_mm_and_pd, m, a);
+            let y = each!(_mm_andnot_pd, m, b);
+            each!(_mm_or_pd, x, y)
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            let mut m = 0;
+            for h in 0..4 {
+                m |= (unsafe { _mm_movemask_pd(self.0[h]) } as u32) << (2 * h);
+            }
+            m
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod avx_d {
+    use std::arch::x86_64::*;
+
+    /// Two AVX registers of four f64; only used inside functions compiled with AVX.
+    #[derive(Clone, Copy)]
+    pub(crate) struct AvxD(pub(crate) [__m256d; 2]);
+
+    macro_rules! each {
+        ($f:ident, $a:expr, $b:expr) => {
+            unsafe { AvxD([$f($a.0[0], $b.0[0]), $f($a.0[1], $b.0[1])]) }
+        };
+    }
+
+    // SAFETY (every method): only called from `LeafTable::ranges8_avx` (kernels8.rs), compiled with
+    // AVX and reached only when the CPU has it; inlined there.
+    impl super::D8 for AvxD {
+        #[inline(always)]
+        fn splat(x: f64) -> Self {
+            unsafe { AvxD([_mm256_set1_pd(x); 2]) }
+        }
+        #[inline(always)]
+        fn load(a: &[f64; 8]) -> Self {
+            unsafe { AvxD([_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(a.as_ptr().add(4))]) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f64; 8] {
+            let mut a = [0.0f64; 8];
+            unsafe {
+                _mm256_storeu_pd(a.as_mut_ptr(), self.0[0]);
+                _mm256_storeu_pd(a.as_mut_ptr().add(4), self.0[1]);
+            }
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            each!(_mm256_add_pd, self, o)
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            each!(_mm256_sub_pd, self, o)
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            each!(_mm256_mul_pd, self, o)
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            each!(_mm256_div_pd, self, o)
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { AvxD([_mm256_sqrt_pd(self.0[0]), _mm256_sqrt_pd(self.0[1])]) }
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            let m = Self::splat(-0.0);
+            each!(_mm256_xor_pd, m, self)
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            let m = Self::splat(-0.0);
+            let sign = each!(_mm256_and_pd, s, m);
+            let mag = each!(_mm256_andnot_pd, m, self);
+            each!(_mm256_or_pd, sign, mag)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            unsafe { AvxD([_mm256_cmp_pd::<_CMP_LE_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_LE_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            unsafe { AvxD([_mm256_cmp_pd::<_CMP_GE_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_GE_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            unsafe { AvxD([_mm256_cmp_pd::<_CMP_EQ_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_EQ_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            unsafe { AvxD([_mm256_blendv_pd(b.0[0], a.0[0], m.0[0]), _mm256_blendv_pd(b.0[1], a.0[1], m.0[1])]) }
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            unsafe { (_mm256_movemask_pd(self.0[0]) | _mm256_movemask_pd(self.0[1]) << 4) as u32 }
+        }
+    }
+}
