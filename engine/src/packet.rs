@@ -197,14 +197,28 @@ fn containing_leaves(program: &Program, n: u32, out: &mut Vec<u32>) {
     }
 }
 
-/// The origins of eight rays.
-fn rays_o(rays: &[Ray]) -> [Vec3; 8] {
-    std::array::from_fn(|k| rays[k].origin)
+/// Do the rays of `tile` (of the whole scene without one) share work in a
+/// packet: does it keep a leaf with a packet kernel, or a wide union?
+fn shares_work(tile: Option<&TileView>) -> bool {
+    tile.is_none_or(|t| t.kernels8 || t.unions)
 }
 
-/// The directions of eight rays.
-fn rays_d(rays: &[Ray]) -> [Vec3; 8] {
-    std::array::from_fn(|k| rays[k].dir)
+/// Does `tile` (the whole scene without one) keep a leaf with a packet kernel?
+fn solves_leaves(tile: Option<&TileView>) -> bool {
+    tile.is_none_or(|t| t.kernels8)
+}
+
+/// Readies `memo` for a packet of eight plain rays (`ctx`, no memo yet) of
+/// `tile`: its wide unions walked and its analytic leaves solved for all
+/// lanes when the first lane asks.
+fn ready_memo(memo: &mut PacketMemo, ctx: &[RayCtx; 8], tile: Option<&TileView>) {
+    memo.clear();
+    if tile.is_some_and(|t| t.unions) {
+        memo.walk_unions_for(ctx, 0xff);
+    }
+    if solves_leaves(tile) {
+        memo.solve_leaves_for(&ctx.map(|c| c.ray.origin), &ctx.map(|c| c.ray.dir), 0xff);
+    }
 }
 
 /// Bake step of the packet path: the nearest-mode meshes traced ahead per
@@ -309,7 +323,7 @@ impl RenderScene {
         if !meshes {
             let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
             // (A tile without packet kernels or wide unions has nothing to share.)
-            if n == 8 && tile.is_none_or(|t| t.kernels8 || t.unions) && rays.iter().all(plain) {
+            if n == 8 && shares_work(tile) && rays.iter().all(plain) {
                 self.lane_packet(rays, ps, out, normals, tile);
                 return;
             }
@@ -388,7 +402,7 @@ impl RenderScene {
             ps.memo.walk_unions_for(&plain, left);
         }
         // Its analytic leaves, solved for all lanes when the first asks.
-        if tile.is_none_or(|t| t.kernels8) {
+        if solves_leaves(tile) {
             ps.memo.solve_leaves_for(&[o; 8], &d, left);
         }
         // All eight contexts are written before the first is read: reading one
@@ -423,13 +437,7 @@ impl RenderScene {
     /// eight rays when the first of them asks for it.
     fn lane_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
         let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
-        ps.memo.clear();
-        if tile.is_some_and(|t| t.unions) {
-            ps.memo.walk_unions_for(&plain, 0xff);
-        }
-        if tile.is_none_or(|t| t.kernels8) {
-            ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
-        }
+        ready_memo(&mut ps.memo, &plain, tile);
         let memo = &ps.memo;
         for k in 0..8 {
             let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
@@ -440,30 +448,21 @@ impl RenderScene {
     /// Any-hit for up to eight rays inside the region `tile` was prepared
     /// for (`out[k]` for `rays[k]`), the same as [`RenderScene::occluded_in`]
     /// ray by ray: eight rays in range (a tile's shadow rays towards one
-    /// light) walk the tile's wide unions of leaves together (when the
-    /// first of them asks for one).
+    /// light) walk the tile's wide unions of leaves and solve its analytic
+    /// leaves together (when the first of them asks for one).
     pub fn occluded_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [bool], tile: Option<&TileView>) {
         let n = rays.len().min(out.len());
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
-        match tile {
-            _ if n == 8 && tile.is_none_or(|t| t.kernels8 || t.unions) && rays.iter().all(plain) => {
-                let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
-                ps.memo.clear();
-                if tile.is_some_and(|t| t.unions) {
-                    ps.memo.walk_unions_for(&ctx, 0xff);
-                }
-                if tile.is_none_or(|t| t.kernels8) {
-                    ps.memo.solve_leaves_for(&rays_o(rays), &rays_d(rays), 0xff);
-                }
-                let memo = &ps.memo;
-                for k in 0..8 {
-                    out[k] = self.occluded_ctx(&RayCtx { memo: Some((memo, k)), ..ctx[k] }, &mut ps.scratch, tile);
-                }
+        if n == 8 && shares_work(tile) && rays.iter().all(plain) {
+            let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
+            ready_memo(&mut ps.memo, &ctx, tile);
+            let memo = &ps.memo;
+            for k in 0..8 {
+                out[k] = self.occluded_ctx(&RayCtx { memo: Some((memo, k)), ..ctx[k] }, &mut ps.scratch, tile);
             }
-            _ => {
-                for k in 0..n {
-                    out[k] = self.occluded_in(&rays[k], &mut ps.scratch, tile);
-                }
+        } else {
+            for k in 0..n {
+                out[k] = self.occluded_in(&rays[k], &mut ps.scratch, tile);
             }
         }
     }
