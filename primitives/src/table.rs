@@ -764,14 +764,7 @@ impl LeafTable {
             LeafKind::Cylinder => kernels::cylinder(lo, ld),
             LeafKind::Cone => kernels::cone(lo, ld, self.p0[iu].x, self.p0[iu].y),
             LeafKind::HalfSpace => kernels::half_space(lo, ld, self.p0[iu].truncate(), self.p0[iu].w),
-            LeafKind::Torus => {
-                let mut buf = [(0.0f32, 0.0f32); 3];
-                let n = kernels::torus_tol(lo, ld, (self.p0[iu].x, self.torus_tol), &mut buf);
-                for &(a, b) in &buf[..n] {
-                    push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, tmin, tmax);
-                }
-                return;
-            }
+            LeafKind::Torus => unreachable!("a torus is traced in f64 by torus_spans"),
             LeafKind::SweptSphere => {
                 self.sweeps[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
                 return;
@@ -932,7 +925,7 @@ impl LeafTable {
                 let r = p0.x + (p0.y - p0.x) * l.z;
                 l.x * l.x + l.y * l.y <= r * r && (0.0..=1.0).contains(&l.z)
             }
-            LeafKind::Torus => kernels::torus_contains(l.as_dvec3(), p0.x as f64),
+            LeafKind::Torus => unreachable!("a torus is classified in f64 (torus_local)"),
             LeafKind::HalfSpace => p0.truncate().dot(l) <= p0.w,
             LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].contains(l),
             LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].contains(l),
@@ -984,10 +977,7 @@ impl LeafTable {
                     xy - Vec3::Z * (rb - ra) * if r >= 0.0 { 1.0 } else { -1.0 }
                 }
             },
-            LeafKind::Torus => {
-                let xy = Vec3::new(l.x, l.y, 0.0).normalize_or(Vec3::X);
-                l - xy
-            }
+            LeafKind::Torus => unreachable!("a torus's normal is made in f64 (torus_local)"),
             LeafKind::HalfSpace => p0.truncate(),
             LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].normal(sub, l),
             LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].normal(sub, l),
