@@ -173,26 +173,20 @@ fn leaf_kernels(c: &mut Criterion) {
             .map(|c| Rays8Soa::new(&std::array::from_fn(|k| c[k].origin), &std::array::from_fn(|k| c[k].dir)))
             .collect();
         let mut r8 = Ranges8::default();
-        g.bench_function(format!("{name} x8 packet"), |bch| {
-            bch.iter(|| {
-                let mut n = 0u32;
-                for p in &packets {
-                    leaves.ranges8(i, black_box(p), 0xff, &mut r8);
-                    n += r8.hit.count_ones();
-                }
-                n
-            })
-        });
-        g.bench_function(format!("{name} x8 packet sse2"), |bch| {
-            bch.iter(|| {
-                let mut n = 0u32;
-                for p in &packets {
-                    leaves.ranges8_sse(i, black_box(p), 0xff, &mut r8);
-                    n += r8.hit.count_ones();
-                }
-                n
-            })
-        });
+        let mut packet_bench = |label: &str, solve: &dyn Fn(&Rays8Soa, &mut Ranges8)| {
+            g.bench_function(format!("{name} {label}"), |bch| {
+                bch.iter(|| {
+                    let mut n = 0u32;
+                    for p in &packets {
+                        solve(black_box(p), &mut r8);
+                        n += r8.hit.count_ones();
+                    }
+                    n
+                })
+            });
+        };
+        packet_bench("x8 packet", &|p, r| leaves.ranges8(i, p, 0xff, r));
+        packet_bench("x8 packet sse2", &|p, r| leaves.ranges8_sse(i, p, 0xff, r));
     }
     g.finish();
 }
