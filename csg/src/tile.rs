@@ -63,9 +63,8 @@ pub struct TileProgram {
     planes: Vec<Plane>,
     /// Counts since the last [`TileProgram::take_counts`].
     counts: TileCounts,
-    /// Has a leaf with a packet kernel been kept since [`TileProgram::begin`]
-    /// (or a node kept whole, whose leaves were not looked at)?
-    pub kernels8: bool,
+    /// See [`TileProgram::kernels8`].
+    kernels8: bool,
 }
 
 impl TileProgram {
@@ -88,6 +87,13 @@ impl TileProgram {
         p.children.truncate(self.base_children);
         p.local_len = 0;
         self.kernels8 = false;
+    }
+
+    /// Has a leaf with a packet kernel ([`LeafTable::has_kernel8`]) been
+    /// kept since [`TileProgram::begin`] (or a node kept whole, whose leaves
+    /// were not looked at)?
+    pub fn kernels8(&self) -> bool {
+        self.kernels8
     }
 
     /// The counts so far, reset.

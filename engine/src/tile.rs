@@ -105,7 +105,7 @@ impl TileScratch {
             root_of: &self.root_of,
             bounded: self.listed.then_some(&self.boxes),
             unions: self.unions,
-            kernels8: self.tp.kernels8,
+            kernels8: self.tp.kernels8(),
         }
     }
 
