@@ -13,7 +13,7 @@ pub struct Knobs {
     pub gcyl: Option<f32>,
     /// Rotation-minimizing (and Frenet) frame samples per segment.
     pub frame: Option<u32>,
-    /// Torus root polish tolerance, relative to its outer radius (0: full f64;
+    /// Torus root polish tolerance, relative to its minor radius (0: full f64;
     /// `None`: [`rothray_primitives::kernels::TORUS_TOLERANCE`]).
     pub torus: Option<f32>,
     /// Mesh winding number far-field acceptance ratio (node radii; infinity:
@@ -67,7 +67,7 @@ impl Knob {
         match self {
             Knob::Sweep | Knob::Gcyl => "tolerance / size",
             Knob::Frame => "samples per segment",
-            Knob::Torus => "polish tolerance / outer radius",
+            Knob::Torus => "polish tolerance / minor radius",
             Knob::Winding => "far-field ratio (node radii)",
             Knob::Fuse => "fusing tolerance / scene size",
         }
@@ -78,7 +78,7 @@ impl Knob {
         match self {
             Knob::Sweep | Knob::Gcyl => &[1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8],
             Knob::Frame => &[2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0],
-            Knob::Torus => &[1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8, 1e-10, 0.0],
+            Knob::Torus => &[1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-7, 1e-8, 1e-10, 0.0],
             Knob::Winding => &[1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 10.0],
             Knob::Fuse => &[1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7],
         }

@@ -269,23 +269,27 @@ pub fn torus_contains(p: DVec3, rho: f64) -> bool {
 /// ray's closest approach to the centre and normalising the direction (small,
 /// well-scaled coefficients, no cubic term), roots are isolated through the
 /// derivative, a depressed cubic solved in closed form (so grazing pairs are
-/// not lost; [`quartic::depressed_quartic_roots`]) and polished by Newton; spans
-/// come from classifying the midpoints between roots, which stays right for
-/// spindle tori and through tangencies.
+/// not lost; [`quartic::negative_runs`]) and polished by Newton; a ring
+/// torus's spans are the runs where the quartic is negative, a spindle
+/// torus's come from classifying the midpoints between roots (see
+/// [`torus_query`]).
 pub fn torus(o: Vec3, d: Vec3, rho: f32, out: &mut [(f32, f32); 3]) -> usize {
     torus_tol(o, d, (rho, 0.0), out)
 }
 
-/// The torus polish tolerance a bake uses (the `torus` knob's default): on
-/// `benches/scenes/tori.json` (README, "Run time against error") 1e-6 is the
-/// coarsest setting whose nearest hits equal full f64 polishing's on every
-/// error ray (1e-4 is off by 9e-8 of the scene's size); full polishing
-/// (0) traces them about a third slower (0.0237 s against 0.0341 s at 480x270).
-pub const TORUS_TOLERANCE: f32 = 1e-6;
+/// The torus polish tolerance a bake uses (the `torus` knob's default),
+/// relative to the minor radius: on `benches/scenes/tori.json` (README, "Run
+/// time against error") 1e-7 is the coarsest setting whose nearest hits
+/// equal full f64 polishing's on every error ray (1e-6 is off by 9e-8 of
+/// the scene's size, one f32 ulp). A root's Newton stops once its step's
+/// quadratic convergence puts the next iterate within the tolerance, so
+/// each root is about as good as the tolerance says, no better.
+pub const TORUS_TOLERANCE: f32 = 1e-7;
 
-/// [`torus`] with the roots polished only to `tol` times the outer radius
-/// `1 + rho` (relative to the torus' size; 0 polishes to full f64 precision, the default):
-/// `shape` is `(rho, tol)`. The `torus` knob of `rothray bench --knob`.
+/// [`torus`] with the roots polished only to `tol` times the minor radius
+/// `rho` (the tube's size: a thin tube's roots are as good relative to it
+/// as a fat one's; 0 polishes to full f64 precision): `shape` is
+/// `(rho, tol)`. The `torus` knob of `rothray bench --knob`.
 pub fn torus_tol(o: Vec3, d: Vec3, shape: (f32, f64), out: &mut [(f32, f32); 3]) -> usize {
     torus_tol64(o.as_dvec3(), d.as_dvec3(), shape, out)
 }
@@ -293,35 +297,156 @@ pub fn torus_tol(o: Vec3, d: Vec3, shape: (f32, f64), out: &mut [(f32, f32); 3])
 /// [`torus_tol`] for a line given in f64 (the leaf table maps a torus's rays
 /// in f64: see [`crate::LeafTable::spans_in`]).
 pub fn torus_tol64(o: DVec3, d: DVec3, shape: (f32, f64), out: &mut [(f32, f32); 3]) -> usize {
-    let (rho, tol) = (shape.0 as f64, shape.1);
-    let dl = d.length();
-    if !(dl > 0.0) {
-        return 0;
+    torus_query(o, d, shape, TorusAsk { range: (f32::NEG_INFINITY, f32::INFINITY), first_only: false }, out).0
+}
+
+/// What a torus query needs: spans on `range` (spans reaching past it may
+/// come unclipped), and only the first one that `range` keeps, or all.
+#[derive(Clone, Copy, Debug)]
+pub struct TorusAsk {
+    /// The ray's range in `t`.
+    pub range: (f32, f32),
+    /// A nearest-hit query: the first span that `range` keeps suffices.
+    pub first_only: bool,
+}
+
+/// The line `o + t d` in the torus' frame as the quartic sees it: origin at
+/// the closest approach `oc` to the centre, unit direction `dn`, `s = t |d| - tc`.
+struct TorusLine {
+    dl: f64,
+    dn: DVec3,
+    tc: f64,
+    oc: DVec3,
+    /// Half the chord of the bounding sphere, slightly widened.
+    h: f64,
+}
+
+impl TorusLine {
+    /// `None` when the line misses the torus's bounding sphere or slab.
+    #[inline(always)]
+    fn new(o: DVec3, d: DVec3, rho: f64) -> Option<TorusLine> {
+        let dl = d.length();
+        if !(dl > 0.0) {
+            return None;
+        }
+        let dn = d / dl;
+        let tc = -o.dot(dn);
+        let oc = o + dn * tc;
+        let rb = 1.0 + rho;
+        let h2 = rb * rb - oc.length_squared();
+        if h2 <= 0.0 {
+            return None;
+        }
+        let h = h2.sqrt() * (1.0 + 1e-9) + 1e-12;
+        // The solid lies in the slab |z| <= rho: a chord of the bounding sphere
+        // that stays outside it meets nothing (no root, no inside), so the quartic
+        // is skipped. (A thin torus fills little of its sphere.)
+        let zr = dn.z.abs() * h;
+        if oc.z - zr > rho * (1.0 + 1e-9) || oc.z + zr < -rho * (1.0 + 1e-9) {
+            return None;
+        }
+        Some(TorusLine { dl, dn, tc, oc, h })
     }
-    let dn = d / dl;
-    let tc = -o.dot(dn);
-    let oc = o + dn * tc;
-    let rb = 1.0 + rho;
-    let h2 = rb * rb - oc.length_squared();
-    if h2 <= 0.0 {
-        return 0;
+
+    /// q(s) = (s^2 + e)^2 - 4 (a2 s^2 + 2 a1 s + a0), s = distance from oc,
+    /// as `[c0, c1, c2]` of the depressed quartic.
+    #[inline(always)]
+    fn quartic(&self, rho: f64) -> [f64; 3] {
+        let (oc, dn) = (self.oc, self.dn);
+        let e = oc.length_squared() + 1.0 - rho * rho;
+        let a2 = dn.x * dn.x + dn.y * dn.y;
+        let a1 = oc.x * dn.x + oc.y * dn.y;
+        let a0 = oc.x * oc.x + oc.y * oc.y;
+        [e * e - 4.0 * a0, -8.0 * a1, 2.0 * e - 4.0 * a2]
     }
-    let h = h2.sqrt() * (1.0 + 1e-9) + 1e-12;
-    // The solid lies in the slab |z| <= rho: a chord of the bounding sphere
-    // that stays outside it meets nothing (no root, no inside), so the quartic
-    // is skipped. (A thin torus fills little of its sphere.)
-    let zr = dn.z.abs() * h;
-    if oc.z - zr > rho * (1.0 + 1e-9) || oc.z + zr < -rho * (1.0 + 1e-9) {
-        return 0;
+
+    #[inline(always)]
+    fn t(&self, s: f64) -> f32 {
+        ((s + self.tc) / self.dl) as f32
     }
-    let e = oc.length_squared() + 1.0 - rho * rho;
-    let a2 = dn.x * dn.x + dn.y * dn.y;
-    let a1 = oc.x * dn.x + oc.y * dn.y;
-    let a0 = oc.x * oc.x + oc.y * oc.y;
-    // q(s) = (s^2 + e)^2 - 4 (a2 s^2 + 2 a1 s + a0), s = distance from oc.
-    let c = [e * e - 4.0 * a0, -8.0 * a1, 2.0 * e - 4.0 * a2];
+
+    /// The window in `s` whose roots can matter on the `t` range: a root
+    /// outside it lands outside the range once converted to f32 (the margin,
+    /// 1e-6 relative, is far above f32 rounding and f64 error), so clipping
+    /// makes any stand-in beyond it give the same span.
+    #[inline(always)]
+    fn window(&self, (tmin, tmax): (f32, f32)) -> (f64, f64) {
+        let slack = |t: f32| 1e-6 * (t.abs() as f64 * self.dl) + 1e-12 * (self.tc.abs() + self.h);
+        let lo = tmin as f64 * self.dl - self.tc - slack(tmin);
+        let hi = tmax as f64 * self.dl - self.tc + slack(tmax);
+        // Infinite or NaN ends: no window on that side.
+        (if lo >= -f64::MAX { lo } else { f64::NEG_INFINITY }, if hi <= f64::MAX { hi } else { f64::INFINITY })
+    }
+}
+
+/// The torus's spans for `ask`, with the place up to which they are exact:
+/// `f32::INFINITY`, or with `first_only` the end of the first span the range
+/// keeps when later spans were left out. Spans may reach past the range
+/// (the caller clips).
+///
+/// A ring torus (`rho < 1`) is inside exactly where the quartic is negative
+/// (q factors into `((r-1)^2 + z^2 - rho^2) ((r+1)^2 + z^2 - rho^2)`, whose
+/// second factor is then positive), so its spans are the quartic's negative
+/// runs, and only the roots that the range and `first_only` need are
+/// polished: a shadow ray leaving the surface skips the roots behind it, a
+/// nearest query the pair past its first span. A spindle torus also
+/// contains the lemon where both factors are negative: its spans come from
+/// every root, by classifying the points between them.
+pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &mut [(f32, f32); 3]) -> (usize, f32) {
+    let rho = shape.0 as f64;
+    let Some(line) = TorusLine::new(o, d, rho) else { return (0, f32::INFINITY) };
+    let c = line.quartic(rho);
+    let eps = shape.1 * rho;
+    if rho >= 1.0 {
+        return (spindle_spans(&line, &c, (rho, eps), out), f32::INFINITY);
+    }
+    let mut runs = [(quartic::RunEnd::Exact(0.0), quartic::RunEnd::Exact(0.0)); 3];
+    let nr = quartic::negative_runs(&c, line.h, &mut runs);
+    let (w_lo, w_hi) = line.window(ask.range);
+    let (tmin, tmax) = ask.range;
+    let mut count = 0;
+    for (k, &(e0, e1)) in runs[..nr].iter().enumerate() {
+        if e1.hi() < w_lo {
+            continue; // wholly before the range
+        }
+        if e0.lo() > w_hi {
+            break; // this run and the rest lie past it
+        }
+        // An end outside the window stands in for the root there.
+        let (x0, x1) = match (e0.hi() >= w_lo, e1.lo() <= w_hi) {
+            (true, true) => quartic::RunEnd::polish_pair(&c, e0, e1, eps),
+            (true, false) => (e0.polish(&c, eps), e1.hi()),
+            (false, true) => (e0.lo(), e1.polish(&c, eps)),
+            (false, false) => (e0.lo(), e1.hi()),
+        };
+        let (t0, t1) = (line.t(x0), line.t(x1));
+        out[count] = (t0, t1);
+        count += 1;
+        if ask.first_only && t1.min(tmax) > t0.max(tmin) {
+            let more = runs[k + 1..nr].iter().any(|r| r.0.lo() <= w_hi);
+            return (count, if more { t1 } else { f32::INFINITY });
+        }
+    }
+    (count, f32::INFINITY)
+}
+
+/// The spans from every root, the pieces between them classified by their
+/// midpoints (the spindle torus's path, for any torus): the reference the
+/// ring torus's lazy path is tested against.
+#[doc(hidden)]
+pub fn torus_by_midpoints(o: DVec3, d: DVec3, shape: (f32, f64), out: &mut [(f32, f32); 3]) -> usize {
+    let rho = shape.0 as f64;
+    let Some(line) = TorusLine::new(o, d, rho) else { return 0 };
+    let c = line.quartic(rho);
+    spindle_spans(&line, &c, (rho, shape.1 * rho), out)
+}
+
+/// A spindle torus's spans: every root, the pieces between them classified
+/// by their midpoints.
+fn spindle_spans(line: &TorusLine, c: &[f64; 3], (rho, eps): (f64, f64), out: &mut [(f32, f32); 3]) -> usize {
+    let h = line.h;
     let mut roots = [0.0; 4];
-    let n = quartic::depressed_quartic_roots(&c, h, tol * rb, &mut roots);
+    let n = quartic::depressed_quartic_roots(c, h, eps, &mut roots);
     // Breakpoints: -h, roots..., h; classify each piece by its midpoint.
     let mut pts = [0.0f64; 8];
     pts[0] = -h;
@@ -340,12 +465,12 @@ pub fn torus_tol64(o: DVec3, d: DVec3, shape: (f32, f64), out: &mut [(f32, f32);
     let mut open: Option<f64> = None;
     for i in 0..np - 1 {
         let m = 0.5 * (pts[i] + pts[i + 1]);
-        let inside = torus_contains(oc + dn * m, rho);
+        let inside = torus_contains(line.oc + line.dn * m, rho);
         match (inside, open) {
             (true, None) => open = Some(pts[i]),
             (false, Some(s)) => {
                 if count < out.len() {
-                    out[count] = (((s + tc) / dl) as f32, ((pts[i] + tc) / dl) as f32);
+                    out[count] = (line.t(s), line.t(pts[i]));
                     count += 1;
                 }
                 open = None;
@@ -355,7 +480,7 @@ pub fn torus_tol64(o: DVec3, d: DVec3, shape: (f32, f64), out: &mut [(f32, f32);
     }
     if let Some(s) = open {
         if count < out.len() {
-            out[count] = (((s + tc) / dl) as f32, ((pts[np - 1] + tc) / dl) as f32);
+            out[count] = (line.t(s), line.t(pts[np - 1]));
             count += 1;
         }
     }

@@ -11,7 +11,7 @@
 //! each quartic root's Newton starts from a quadratic model at the bracket's
 //! extremum, not the bracket's midpoint.
 
-use crate::poly::Bracket;
+use crate::poly::{Bracket, Proposal};
 
 /// `q(s)` by Horner, in the same order as [`crate::poly::eval`] on
 /// `[c0, c1, c2, 0, 1]` (the same rounding as the generic path).
@@ -93,11 +93,33 @@ pub fn depressed_cubic_roots(p: f64, r: f64, out: &mut [f64; 3]) -> usize {
     3
 }
 
-/// [`Bracket::step`] to the end (at most 100 steps).
+/// One Newton step in the bracket from `br.x`: the root when done. Besides
+/// [`Bracket::propose`]'s stops (a step or the bracket below the tolerance),
+/// it stops when the step's quadratic convergence already puts the next
+/// iterate within the tolerance: a Newton step of length `s` leaves an error
+/// of about `|q''| s^2 / (2 |q'|)`, and q'' costs two operations here. That
+/// saves the evaluation that would only confirm the root.
+#[inline(always)]
+fn step(c: &[f64; 3], br: &mut Bracket, eps: f64) -> Option<f64> {
+    let x = br.x;
+    let (f, df) = q_d(c, x);
+    match br.propose(f, df, eps) {
+        Proposal::Root(r) => Some(r),
+        Proposal::Next(n) => {
+            let d2 = 12.0 * x * x + 2.0 * c[2];
+            if n.newton && (d2 * n.s * n.s).abs() <= 0.25 * n.tol * df.abs() {
+                return Some(n.nx);
+            }
+            br.x = n.nx;
+            None
+        }
+    }
+}
+
+/// [`step`] to the end (at most 100 steps).
 fn refine(c: &[f64; 3], mut br: Bracket, eps: f64) -> f64 {
     for _ in 0..100 {
-        let (f, df) = q_d(c, br.x);
-        if let Some(r) = br.step(f, df, eps) {
+        if let Some(r) = step(c, &mut br, eps) {
             return r;
         }
     }
@@ -111,8 +133,7 @@ fn refine(c: &[f64; 3], mut br: Bracket, eps: f64) -> f64 {
 /// gives.
 fn refine_pair(c: &[f64; 3], mut b0: Bracket, mut b1: Bracket, eps: f64) -> (f64, f64) {
     for _ in 0..100 {
-        let ((f0, d0), (f1, d1)) = (q_d(c, b0.x), q_d(c, b1.x));
-        match (b0.step(f0, d0, eps), b1.step(f1, d1, eps)) {
+        match (step(c, &mut b0, eps), step(c, &mut b1, eps)) {
             (Some(r0), Some(r1)) => return (r0, r1),
             (Some(r0), None) => return (r0, refine(c, b1, eps)),
             (None, Some(r1)) => return (refine(c, b0, eps), r1),
@@ -157,6 +178,54 @@ enum Found {
     Polish(Bracket),
 }
 
+/// The quartic's breakpoints on `[-h, h]`, increasing: the ends and the
+/// critical points strictly inside, with the values there. Between two
+/// consecutive ones the quartic is monotone.
+struct Marks {
+    x: [f64; 5],
+    f: [f64; 5],
+    n: usize,
+}
+
+impl Marks {
+    fn new(c: &[f64; 3], h: f64) -> Marks {
+        let mut crit = [0.0f64; 3];
+        let nc = depressed_cubic_roots(0.5 * c[2], 0.25 * c[1], &mut crit);
+        let mut m = Marks { x: [-h; 5], f: [q(c, -h); 5], n: 1 };
+        for &b in &crit[..nc] {
+            if b > m.x[m.n - 1] && b < h {
+                (m.x[m.n], m.f[m.n]) = (b, q(c, b));
+                m.n += 1;
+            }
+        }
+        (m.x[m.n], m.f[m.n]) = (h, q(c, h));
+        m.n += 1;
+        m
+    }
+
+    /// The piece from mark `j` to mark `j + 1` as a bracket end pair for
+    /// [`seed`]: `(x, q(x), is a critical point)` each.
+    #[inline(always)]
+    fn piece(&self, j: usize) -> Piece {
+        let last = self.n - 1;
+        Piece { a: (self.x[j], self.f[j], j > 0), b: (self.x[j + 1], self.f[j + 1], j + 1 < last) }
+    }
+}
+
+/// A monotone piece whose ends' values have opposite signs: one root inside.
+#[derive(Clone, Copy)]
+pub struct Piece {
+    a: (f64, f64, bool),
+    b: (f64, f64, bool),
+}
+
+impl Piece {
+    /// The piece's root, polished to `eps` from the seed of [`seed`].
+    fn bracket(self, c: &[f64; 3]) -> Bracket {
+        Bracket { a: self.a.0, b: self.b.0, neg_at_a: self.a.1 < 0.0, x: seed(c, self.a, self.b) }
+    }
+}
+
 /// Pushes the real roots of `s^4 + c[2] s^2 + c[1] s + c[0]` in `[-h, h]` into
 /// `out`, increasing; returns how many. As [`crate::poly::roots_in_tol`] with
 /// `eps`: a touching double root is reported once if its value is exactly 0,
@@ -165,33 +234,23 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
     if !(h > 0.0) {
         return 0;
     }
-    let mut crit = [0.0f64; 3];
-    let nc = depressed_cubic_roots(0.5 * c[2], 0.25 * c[1], &mut crit);
+    let m = Marks::new(c, h);
     // First every bracket (cheap), then the polishing, two at a time.
     let mut found = [Found::Exact(0.0); 4];
     let mut nf = 0;
-    let mut a = -h;
-    let mut fa = q(c, a);
-    if fa == 0.0 {
-        found[0] = Found::Exact(a);
+    if m.f[0] == 0.0 {
+        found[0] = Found::Exact(-h);
         nf = 1;
     }
-    for i in 0..=nc {
-        let b = if i < nc { crit[i] } else { h };
-        if i < nc && (b <= a || b >= h) {
-            continue;
-        }
-        let fb = q(c, b);
+    for j in 0..m.n - 1 {
+        let (fa, fb) = (m.f[j], m.f[j + 1]);
         if fb == 0.0 {
-            found[nf] = Found::Exact(b);
+            found[nf] = Found::Exact(m.x[j + 1]);
             nf += 1;
         } else if fa != 0.0 && (fa < 0.0) != (fb < 0.0) {
-            let x = seed(c, (a, fa, i > 0), (b, fb, i < nc));
-            found[nf] = Found::Polish(Bracket { a, b, neg_at_a: fa < 0.0, x });
+            found[nf] = Found::Polish(m.piece(j).bracket(c));
             nf += 1;
         }
-        a = b;
-        fa = fb;
         if nf >= 4 {
             break;
         }
@@ -222,6 +281,104 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
         }
     }
     count
+}
+
+/// An end of a run where the quartic is negative: a point where it is 0, or
+/// a root not polished yet, in its piece.
+#[derive(Clone, Copy)]
+pub enum RunEnd {
+    /// Exactly here (a mark where q is 0, or an end of `[-h, h]`).
+    Exact(f64),
+    /// The one root of this monotone piece.
+    Root(Piece),
+}
+
+impl RunEnd {
+    /// The smallest place the end can be.
+    #[inline(always)]
+    pub fn lo(self) -> f64 {
+        match self {
+            RunEnd::Exact(x) => x,
+            RunEnd::Root(p) => p.a.0,
+        }
+    }
+
+    /// The largest place the end can be.
+    #[inline(always)]
+    pub fn hi(self) -> f64 {
+        match self {
+            RunEnd::Exact(x) => x,
+            RunEnd::Root(p) => p.b.0,
+        }
+    }
+
+    /// The end, polished to `eps` where it is a root.
+    pub fn polish(self, c: &[f64; 3], eps: f64) -> f64 {
+        match self {
+            RunEnd::Exact(x) => x,
+            RunEnd::Root(p) => refine(c, p.bracket(c), eps),
+        }
+    }
+
+    /// Two ends polished at once ([`refine_pair`]): each as [`RunEnd::polish`] gives it.
+    pub fn polish_pair(c: &[f64; 3], e0: RunEnd, e1: RunEnd, eps: f64) -> (f64, f64) {
+        match (e0, e1) {
+            (RunEnd::Root(p0), RunEnd::Root(p1)) => refine_pair(c, p0.bracket(c), p1.bracket(c), eps),
+            _ => (e0.polish(c, eps), e1.polish(c, eps)),
+        }
+    }
+}
+
+/// The runs where `s^4 + c[2] s^2 + c[1] s + c[0] < 0` on `[-h, h]`, as
+/// (start, end) pairs, increasing, none polished yet (the caller polishes
+/// only the ends it needs); returns how many (at most 3: a quartic has at
+/// most two such runs, rounding at the ends may add one).
+///
+/// Each monotone piece between marks is negative before or after its root
+/// as its ends' values say; a mark where q is 0 separates the runs only when
+/// the sign differs on its two sides (a touching double root joins nothing).
+pub fn negative_runs(c: &[f64; 3], h: f64, out: &mut [(RunEnd, RunEnd); 3]) -> usize {
+    if !(h > 0.0) {
+        return 0;
+    }
+    let m = Marks::new(c, h);
+    let mut runs = Runs { out, n: 0, inside: false, open: RunEnd::Exact(-h) };
+    for j in 0..m.n - 1 {
+        let (fa, fb) = (m.f[j], m.f[j + 1]);
+        if fa != 0.0 && fb != 0.0 && (fa < 0.0) != (fb < 0.0) {
+            runs.set(fa < 0.0, RunEnd::Exact(m.x[j]));
+            runs.set(fb < 0.0, RunEnd::Root(m.piece(j)));
+        } else {
+            runs.set(if fa != 0.0 { fa < 0.0 } else { fb < 0.0 }, RunEnd::Exact(m.x[j]));
+        }
+    }
+    runs.set(false, RunEnd::Exact(h));
+    runs.n
+}
+
+/// The runs being listed by [`negative_runs`].
+struct Runs<'a> {
+    out: &'a mut [(RunEnd, RunEnd); 3],
+    n: usize,
+    inside: bool,
+    open: RunEnd,
+}
+
+impl Runs<'_> {
+    /// The sign is negative (`inside`) from `at` on.
+    #[inline(always)]
+    fn set(&mut self, inside: bool, at: RunEnd) {
+        if inside == self.inside {
+            return;
+        }
+        if inside {
+            self.open = at;
+        } else if self.n < self.out.len() {
+            self.out[self.n] = (self.open, at);
+            self.n += 1;
+        }
+        self.inside = inside;
+    }
 }
 
 #[cfg(test)]

@@ -292,3 +292,61 @@ fn torus_spans_match_dense_sampling() {
     }
     println!("worst |t - reference| / reach {worst:.3e}; spans shorter than a sample step {short}");
 }
+
+/// The spans of a query clipped to its range, as a caller keeps them
+/// (`push_clipped`: ends past the range become the range's).
+fn clipped(spans: &[(f32, f32)], (lo, hi): (f32, f32)) -> Vec<(f32, f32)> {
+    spans.iter().map(|&(a, b)| (a.max(lo), b.min(hi))).filter(|s| s.1 > s.0).collect()
+}
+
+/// A ring torus's spans come from the quartic's negative runs, with only the
+/// roots a query needs polished (`torus_query`). Against the classification
+/// of the points between all roots (`torus_by_midpoints`, the spindle
+/// torus's path): the same spans on the whole line; and on random ranges
+/// (shadow-like ones starting on the surface among them) the same spans once
+/// clipped, the first-only query's spans equal to the full ones up to the
+/// place it says they are exact, and nothing past it.
+#[test]
+fn ring_torus_queries_match_the_full_classification() {
+    let seed = 0x7_0A07u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let (mut cut_short, mut compared) = (0, 0);
+    for (i, (o, d, rho)) in torus_rays(seed, 20000).into_iter().enumerate() {
+        if rho >= 1.0 {
+            continue;
+        }
+        let shape = (rho, kernels::TORUS_TOLERANCE as f64);
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        let all = kernels::TorusAsk { range: (f32::NEG_INFINITY, f32::INFINITY), first_only: false };
+        let mut full = [(0.0f32, 0.0f32); 3];
+        let (n, v) = kernels::torus_query(od, dd, shape, all, &mut full);
+        let mut mid = [(0.0f32, 0.0f32); 3];
+        let m = kernels::torus_by_midpoints(od, dd, shape, &mut mid);
+        assert_eq!((&full[..n], v), (&mid[..m], f32::INFINITY), "ray {i}: runs against midpoints");
+        // Ranges: random, and starting at each span end (a shadow ray leaving the surface).
+        let mut ranges: Vec<(f32, f32)> = (0..4)
+            .map(|_| {
+                let a = rng.gen_range(-3.0f32..3.0);
+                (a, if rng.gen_bool(0.3) { f32::INFINITY } else { a + rng.gen_range(0.0f32..4.0) })
+            })
+            .collect();
+        ranges.extend(full[..n].iter().flat_map(|s| [(s.0, f32::INFINITY), (s.1, f32::INFINITY)]));
+        for range in ranges {
+            let want = clipped(&full[..n], range);
+            let mut got = [(0.0f32, 0.0f32); 3];
+            let (k, v) = kernels::torus_query(od, dd, shape, kernels::TorusAsk { range, first_only: false }, &mut got);
+            assert_eq!(v, f32::INFINITY);
+            assert_eq!(clipped(&got[..k], range), want, "ray {i} range {range:?}");
+            let (k, v) = kernels::torus_query(od, dd, shape, kernels::TorusAsk { range, first_only: true }, &mut got);
+            let first = clipped(&got[..k], range);
+            let upto: Vec<(f32, f32)> = want.iter().filter(|s| s.0 < v).map(|&(a, b)| (a, b.min(v))).collect();
+            assert_eq!(first, upto, "ray {i} range {range:?}: first-only query, exact up to {v}");
+            assert!(first.len() <= 1 || v == f32::INFINITY, "ray {i}: more than the first span");
+            cut_short += (v < f32::INFINITY) as usize;
+            compared += 1;
+        }
+    }
+    println!("{compared} ranges compared, {cut_short} first-only queries stopped before the end");
+    assert!(cut_short > 100, "the first-only stop was hardly exercised");
+}

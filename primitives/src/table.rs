@@ -687,7 +687,8 @@ impl LeafTable {
             return self.ball_spans(i, ray, (tmin, tmax), out);
         }
         if self.kind[iu] == LeafKind::Torus {
-            return self.torus_spans(i, ray, (tmin, tmax), out);
+            self.torus_spans(i, ray, (tmin, tmax), false, out);
+            return;
         }
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
@@ -719,16 +720,20 @@ impl LeafTable {
     /// The spans of torus `i` along the world ray, its line mapped to the
     /// torus's frame in f64 (a direction of any f32 length needs no
     /// rescaling there).
+    /// With `first_only` (a nearest query) the spans may stop after the
+    /// first one the range keeps; returns where they stop being exact.
     #[inline(always)]
-    fn torus_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
+    fn torus_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, range: (f32, f32), first_only: bool, out: &mut S) -> f32 {
         let iu = i as usize;
         let lo = self.torus_local(iu, ray.origin);
         let ld = self.torus_maps[self.ext[iu] as usize].0 * ray.dir.as_dvec3();
         let mut buf = [(0.0f32, 0.0f32); 3];
-        let n = kernels::torus_tol64(lo, ld, (self.p0[iu].x, self.torus_tol), &mut buf);
+        let ask = kernels::TorusAsk { range, first_only };
+        let (n, valid) = kernels::torus_query(lo, ld, (self.p0[iu].x, self.torus_tol), ask, &mut buf);
         for &(a, b) in &buf[..n] {
-            push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, tmin, tmax);
+            push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, range.0, range.1);
         }
+        valid
     }
 
     /// The spans of ball `i` (kind [`LeafKind::Sphere`]) along the world ray.
@@ -791,8 +796,11 @@ impl LeafTable {
     #[inline(always)]
     pub fn spans_for<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, range: (f32, f32), nearest: Option<f32>, out: &mut S) -> f32 {
         if let Some(slack) = nearest {
-            if self.kind[i as usize] == LeafKind::Mesh {
-                return self.mesh_nearest(i, ray, range, slack, out);
+            match self.kind[i as usize] {
+                LeafKind::Mesh => return self.mesh_nearest(i, ray, range, slack, out),
+                // Its first span suffices (the roots past it are not polished).
+                LeafKind::Torus => return self.torus_spans(i, ray, range, true, out),
+                _ => {}
             }
         }
         self.spans_in(i, ray, range, out);
