@@ -107,12 +107,6 @@ impl RayCtx<'static> {
 }
 
 impl RayCtx<'_> {
-    /// The same ray and tolerance evaluated over `[tmin, tmax]`.
-    #[inline(always)]
-    pub fn with_range(&self, tmin: f32, tmax: f32) -> Self {
-        RayCtx { ray: self.ray.with_range(tmin, tmax), ..*self }
-    }
-
     /// The slack of a leaf query in [`Mode::Nearest`] for a ray of tolerance
     /// `eps` (what [`RayCtx::nearest_slack`] gives it; for packet queries made
     /// before the contexts).
@@ -556,7 +550,15 @@ impl Program {
     /// ends its span with no surface, and `combine` may fuse that end with a
     /// real boundary of another operand.
     pub fn eval(&self, leaves: &LeafTable, root: u32, ctx: &RayCtx, mode: Mode, scratch: &mut Scratch) -> f32 {
-        let (tmin, tmax) = (ctx.ray.tmin, ctx.ray.tmax);
+        self.eval_in(leaves, root, ctx, (ctx.ray.tmin, ctx.ray.tmax), mode, scratch)
+    }
+
+    /// [`Program::eval`] over `range` instead of the ray's own range (the
+    /// objects of one ray are asked on shrinking ranges: a copy of the ray
+    /// context per object, read back by the kernels right after it is
+    /// written, stalled on store forwarding; see `LeafTable::spans_in`).
+    pub fn eval_in(&self, leaves: &LeafTable, root: u32, ctx: &RayCtx, range: (f32, f32), mode: Mode, scratch: &mut Scratch) -> f32 {
+        let (tmin, tmax) = range;
         scratch.out.clear();
         if self.kind[root as usize] == NodeKind::Leaf {
             let v = leaf_spans(leaves, ctx, self.first[root as usize], (tmin, tmax), ctx.nearest(mode), &mut scratch.out);

@@ -182,12 +182,12 @@ impl RenderScene {
         SCRATCH.with(|s| self.occluded_with(ray, &mut s.borrow_mut()))
     }
 
-    /// First surface of object `oi` on the range of `ctx`: `(t, surface)`.
+    /// First surface of object `oi` on `range` of `ctx`'s ray: `(t, surface)`.
     #[inline]
-    fn object_first(&self, obj: ObjRef, ctx: &RayCtx, scratch: &mut Scratch) -> Option<(f32, Surf)> {
+    fn object_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
         let ObjRef { prog, root, oi } = obj;
-        let (tmin, tmax) = (ctx.ray.tmin, ctx.ray.tmax);
-        let valid = prog.eval(&self.leaves, root, ctx, Mode::Nearest, scratch);
+        let (tmin, tmax) = range;
+        let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
         // An exit (the ray starts inside) close to where the result stops being
         // exact is not sure (see `Program::eval`; found by a packet-against-
@@ -219,14 +219,14 @@ impl RenderScene {
         let ObjRef { prog, root, .. } = obj;
         let (tmin, t1, tmax) = range;
         if t1 < tmax {
-            prog.eval(&self.leaves, root, &ctx.with_range(tmin, t1), Mode::All, scratch);
+            prog.eval_in(&self.leaves, root, ctx, (tmin, t1), Mode::All, scratch);
             if let Some((t, s)) = first_surface(scratch.out.as_slice()) {
                 if t < t1 - 16.0 * ctx.eps {
                     return Some((t, s));
                 }
             }
         }
-        prog.eval(&self.leaves, root, &ctx.with_range(tmin, tmax), Mode::All, scratch);
+        prog.eval_in(&self.leaves, root, ctx, (tmin, tmax), Mode::All, scratch);
         first_surface(scratch.out.as_slice())
     }
 
@@ -271,7 +271,7 @@ impl RenderScene {
         // by box entry, then index.
         for &oi in &self.unbounded {
             let Some(obj) = self.obj_ref(oi, tile) else { continue };
-            if let Some((t, s)) = self.object_first(obj, &ctx.with_range(ray.tmin, best_t), scratch) {
+            if let Some((t, s)) = self.object_first(obj, ctx, (ray.tmin, best_t), scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -288,7 +288,7 @@ impl RenderScene {
                 break; // sorted by entry: no later box reaches the best hit
             }
             let Some(obj) = self.obj_ref(oi, tile) else { continue };
-            if let Some((t, s)) = self.object_first(obj, &ctx.with_range(ray.tmin, best_t), scratch) {
+            if let Some((t, s)) = self.object_first(obj, ctx, (ray.tmin, best_t), scratch) {
                 if t < best_t || best.is_none() {
                     best_t = t;
                     best = Some((oi, s));
@@ -340,13 +340,15 @@ impl RenderScene {
         let ray = &ctx.ray;
         for &oi in &self.unbounded {
             let Some(obj) = self.obj_ref(oi, tile) else { continue };
-            if self.object_first(obj, ctx, scratch).is_some() {
+            if self.object_first(obj, ctx, (ray.tmin, ray.tmax), scratch).is_some() {
                 return true;
             }
         }
         let mut cands = std::mem::take(&mut scratch.cands);
         self.object_candidates(ray, tile, &mut cands);
-        let hit = cands.iter().any(|&(_, oi)| self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, ctx, scratch).is_some()));
+        let hit = cands
+            .iter()
+            .any(|&(_, oi)| self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, ctx, (ray.tmin, ray.tmax), scratch).is_some()));
         scratch.cands = cands;
         hit
     }

@@ -381,7 +381,7 @@ impl TorusLine {
 
 /// The torus's spans for `ask`, with the place up to which they are exact:
 /// `f32::INFINITY`, or with `first_only` the end of the first span the range
-/// keeps when later spans were left out. Spans may reach past the range
+/// keeps that starts in the range, when later spans were left out. Spans may reach past the range
 /// (the caller clips).
 ///
 /// A ring torus (`rho < 1`) is inside exactly where the quartic is negative
@@ -422,7 +422,10 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
         let (t0, t1) = (line.t(x0), line.t(x1));
         out[count] = (t0, t1);
         count += 1;
-        if ask.first_only && t1.min(tmax) > t0.max(tmin) {
+        // A span the range starts inside of does not stop the query: its exit
+        // at the place the result stops being exact would not be sure to a
+        // caller (which redoes the query in full).
+        if ask.first_only && t1.min(tmax) > t0.max(tmin) && t0 >= tmin {
             let more = runs[k + 1..nr].iter().any(|r| r.0.lo() <= w_hi);
             return (count, if more { t1 } else { f32::INFINITY });
         }

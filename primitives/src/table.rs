@@ -799,12 +799,19 @@ impl LeafTable {
             match self.kind[i as usize] {
                 LeafKind::Mesh => return self.mesh_nearest(i, ray, range, slack, out),
                 // Its first span suffices (the roots past it are not polished).
-                LeafKind::Torus => return self.torus_spans(i, ray, range, true, out),
+                LeafKind::Torus => return self.torus_nearest(i, ray, range, out),
                 _ => {}
             }
         }
         self.spans_in(i, ray, range, out);
         f32::INFINITY
+    }
+
+    /// A torus's spans for a nearest query (out of line, as `mesh_nearest`:
+    /// inlined, it made every leaf query's code bigger).
+    #[inline(never)]
+    fn torus_nearest<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, range: (f32, f32), out: &mut S) -> f32 {
+        self.torus_spans(i, ray, range, true, out)
     }
 
     #[inline(never)]
