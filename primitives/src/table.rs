@@ -120,6 +120,24 @@ pub enum LeafKind {
     Mesh,
 }
 
+impl LeafKind {
+    /// A rough cost of one ray query of a leaf of this kind, relative to a
+    /// half-space's (instructions per query, order of magnitude, from the
+    /// criterion kernels in benches/kernels.rs): what the program builder
+    /// orders an intersection's operands by, cheap first.
+    pub fn query_cost(self) -> u32 {
+        match self {
+            LeafKind::HalfSpace => 1,
+            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cuboid => 2,
+            LeafKind::Cylinder | LeafKind::Cone => 3,
+            LeafKind::Torus => 20,
+            LeafKind::Mesh => 30,
+            LeafKind::SweptSphere => 40,
+            LeafKind::GenCylinder => 60,
+        }
+    }
+}
+
 /// The data of a leaf that is more than a few numbers (shared, immutable).
 #[derive(Clone, Debug)]
 pub enum LeafData {
