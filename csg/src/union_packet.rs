@@ -216,13 +216,16 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
     /// (strictly: a later one may tie), nearest first; the lane's range
     /// end follows its walk.
     fn settle(&mut self, lower: f32, thi: &mut [f32; 8]) {
-        let mut m = self.lanes;
+        // Most settles find nothing to take: the lanes that can take a child
+        // are picked in one pass of compares, not one branch per lane.
+        let mut m = 0u32;
+        for k in 0..8 {
+            m |= (!(self.first[k] >= lower) as u32) << k;
+        }
+        m &= self.lanes;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
-            if self.first[k] >= lower {
-                continue; // nothing listed can be taken yet
-            }
             let cand = &mut self.cands[k];
             sort_cands(cand);
             let st = &mut self.st[k];
