@@ -13,6 +13,7 @@
 //! spend most of their time walking the node's tree, and the neighbouring
 //! rays of a packet walk mostly the same nodes.
 
+use glam::Vec4;
 use rothray_primitives::{
     box_wide::{forms_packet, Lanes8, Rays8, Visit8},
     LeafTable, Ray,
@@ -218,11 +219,9 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
     fn settle(&mut self, lower: f32, thi: &mut [f32; 8]) {
         // Most settles find nothing to take: the lanes that can take a child
         // are picked in one pass of compares, not one branch per lane.
-        let mut m = 0u32;
-        for k in 0..8 {
-            m |= (!(self.first[k] >= lower) as u32) << k;
-        }
-        m &= self.lanes;
+        let l = Vec4::splat(lower);
+        let ge = |h: usize| Vec4::from_slice(&self.first[4 * h..4 * h + 4]).cmpge(l).bitmask();
+        let mut m = !(ge(0) | ge(1) << 4) & self.lanes;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
