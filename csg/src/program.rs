@@ -309,16 +309,49 @@ pub(crate) struct Lists<'s> {
 /// One leaf's spans, `combine`'s scratch and the result (see [`Lists`]).
 pub(crate) type ListsRef<'a> = (&'a mut SpanList, &'a mut SpanList, &'a mut SpanList);
 
+/// Candidate `(pos, t0)` of a wide union as one integer whose order is the
+/// candidates' canonical order: the entry (as `total_cmp` orders it), then
+/// the position.
+#[inline(always)]
+pub(crate) fn cand_key(pos: u32, t0: f32) -> u64 {
+    let b = t0.to_bits();
+    (((b ^ (((b as i32) >> 31) as u32 | 0x8000_0000)) as u64) << 32) | pos as u64
+}
+
+/// The candidate `(pos, t0)` that [`cand_key`] made `k` of.
+#[inline(always)]
+pub(crate) fn cand_of_key(k: u64) -> (u32, f32) {
+    let o = (k >> 32) as u32;
+    let b = if o & 0x8000_0000 != 0 { o ^ 0x8000_0000 } else { !o };
+    (k as u32, f32::from_bits(b))
+}
+
+/// Sorts candidate keys ([`cand_key`]); short lists, which the walks list
+/// nearly in order, by insertion.
+#[inline]
+pub(crate) fn sort_keys(s: &mut [u64]) {
+    if s.len() > 16 {
+        s.sort_unstable();
+        return;
+    }
+    for i in 1..s.len() {
+        let c = s[i];
+        let mut j = i;
+        while j > 0 && s[j - 1] > c {
+            s[j] = s[j - 1];
+            j -= 1;
+        }
+        s[j] = c;
+    }
+}
+
 /// Sorts candidates by entry, then position: a total order, so they are
 /// taken in the same order whichever tree listed them.
 #[inline]
 pub(crate) fn sort_cands(s: &mut [(u32, f32)]) {
-    // One integer key per candidate, ordered as `total_cmp` on the entry,
-    // then the position: one compare instead of two chained ones.
-    let key = |c: &(u32, f32)| {
-        let b = c.1.to_bits();
-        (((b ^ (((b as i32) >> 31) as u32 | 0x8000_0000)) as u64) << 32) | c.0 as u64
-    };
+    // One integer key per candidate ([`cand_key`]): one compare instead of
+    // two chained ones.
+    let key = |c: &(u32, f32)| cand_key(c.0, c.1);
     if s.len() > 16 {
         s.sort_unstable_by_key(key);
         return;

@@ -19,7 +19,7 @@ use rothray_primitives::{
     LeafTable, Ray,
 };
 
-use super::{counts, sort_cands, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
+use super::{cand_key, cand_of_key, counts, sort_keys, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
 use crate::spans::SpanList;
 
 /// The wide unions walked for the current packet, and what walking one more
@@ -33,7 +33,7 @@ pub(crate) struct UnionRecords {
     recs: Vec<MemoLeaf>,
     len: usize,
     accs: Vec<SpanList>,
-    cands: Vec<Vec<(u32, f32)>>,
+    cands: Vec<Vec<u64>>,
     leaf: SpanList,
     tmp: SpanList,
 }
@@ -132,7 +132,7 @@ impl UnionRecords {
             walk.accs[k].clear();
             walk.cands[k].clear();
             if lanes & (1 << k) != 0 && !w.unbounded.is_empty() {
-                walk.cands[k].extend(w.unbounded.iter().map(|&pos| (pos, tmin[k])));
+                walk.cands[k].extend(w.unbounded.iter().map(|&pos| cand_key(pos, tmin[k])));
                 walk.first[k] = tmin[k];
             }
         }
@@ -190,8 +190,9 @@ struct LaneWalks<'p, 'c, 's> {
     tmax: [f32; 8],
     /// Per lane, the smallest entry among its `cands`.
     first: [f32; 8],
-    /// Per lane, the children listed and not visited yet.
-    cands: &'s mut [Vec<(u32, f32)>],
+    /// Per lane, the children listed and not visited yet, as keys
+    /// ([`cand_key`]: sorting them is sorting integers).
+    cands: &'s mut [Vec<u64>],
     accs: &'s mut [SpanList],
     lists: (&'s mut SpanList, &'s mut SpanList),
 }
@@ -207,7 +208,7 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             if t0[k] <= self.st[k].hi {
-                self.cands[k].push((pos, t0[k]));
+                self.cands[k].push(cand_key(pos, t0[k]));
                 self.first[k] = self.first[k].min(t0[k]);
             }
         }
@@ -226,12 +227,13 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             let cand = &mut self.cands[k];
-            sort_cands(cand);
+            sort_keys(cand);
             let st = &mut self.st[k];
             let ask = Ask { leaves: self.leaves, ctx: &self.ctx[k], mode: Mode::Nearest };
             let tmin = self.ctx[k].ray.tmin;
             let mut used = 0;
-            for &(pos, t0) in cand.iter() {
+            for &key in cand.iter() {
+                let (pos, t0) = cand_of_key(key);
                 if t0 >= lower || t0 > st.hi {
                     break;
                 }
@@ -239,12 +241,12 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
                 let (leaf, tmp) = (&mut *self.lists.0, &mut *self.lists.1);
                 self.prog.union_visit(self.n, pos, ask, tmin, st, (leaf, tmp, &mut self.accs[k]));
             }
-            if used < cand.len() && cand[used].1 > st.hi {
+            if used < cand.len() && cand_of_key(cand[used]).1 > st.hi {
                 cand.clear(); // sorted: the rest lies past the lane's end
             } else {
                 cand.drain(..used);
             }
-            self.first[k] = cand.first().map_or(f32::INFINITY, |c| c.1);
+            self.first[k] = cand.first().map_or(f32::INFINITY, |&c| cand_of_key(c).1);
             thi[k] = thi[k].min(st.hi);
         }
     }
