@@ -897,7 +897,7 @@ impl Program {
             return;
         }
         if acc.is_empty() {
-            acc.0.extend_from_slice(leaf.as_slice());
+            acc.append(leaf.as_slice());
         } else {
             combine_into(Op::Union, acc, leaf.as_slice(), ctx.eps, tmp);
         }
@@ -1012,7 +1012,7 @@ impl Program {
         let first = acc.is_empty() && is_first(f, kind);
         if first {
             acc.clear();
-            acc.0.extend_from_slice(r);
+            acc.append(r);
             acc.truncate_at(f.tmax);
         } else {
             combine_into(kind.op(), acc, r, eps, tmp);

@@ -89,7 +89,7 @@ impl PacketMemo {
         }
         let (v, spans) = (e.valid[k], &e.spans[k]);
         if v <= hi {
-            out.0.extend_from_slice(spans);
+            out.append(spans);
         } else if !(spans.is_empty() && v == f32::INFINITY) {
             counts::packet_lane(false);
             return None;
