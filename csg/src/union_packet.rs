@@ -198,7 +198,9 @@ struct LaneWalks<'p, 'c, 's> {
 }
 
 impl Visit8 for LaneWalks<'_, '_, '_> {
-    #[inline]
+    // Inlined into the walk: one call less per leaf box, and the box test
+    // is compiled with the walk's AVX.
+    #[inline(always)]
     fn visit(&mut self, pos: u32, lanes: u32, rays: &Lanes8) {
         // Each lane's entry into the child's own box, as `child_entry` gives it.
         let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
