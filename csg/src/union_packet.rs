@@ -164,7 +164,8 @@ pub const PACKET_UNION_MIN: u32 = 32;
 impl Program {
     /// Is node `n` a wide union of at least [`PACKET_UNION_MIN`] leaves with
     /// a packet tree (what [`PacketMemo::walk_unions_for`] lets packets walk
-    /// together)?
+    /// together)? (Asked by every lane's every union query: inlined.)
+    #[inline]
     pub fn is_packet_union(&self, n: u32) -> bool {
         let nu = n as usize;
         self.kind[nu] == NodeKind::Union
