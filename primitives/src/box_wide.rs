@@ -273,6 +273,13 @@ impl BoxWide {
                 for (s, &(m, _)) in h.iter().enumerate() {
                     hm |= ((m & mask != 0) as u32) << s;
                 }
+                if hm.is_power_of_two() {
+                    // One child met: no order to sort out (`order4` would put
+                    // it first).
+                    let s = hm.trailing_zeros() as usize;
+                    (cur, mask) = (n.child(s as u32), h[s].0 & mask);
+                    continue;
+                }
                 let (order, ne) = order4(h.map(|x| x.1), hm);
                 if ne > 0 {
                     // Far to near, so the nearest is taken first.
