@@ -280,8 +280,9 @@ impl BoxWide {
                     (cur, mask) = (n.child(s as u32), h[s].0 & mask);
                     continue;
                 }
-                let (order, ne) = order4(h.map(|x| x.1), hm);
-                if ne > 0 {
+                // None met: nothing to sort either, on to the deferred subtrees.
+                if hm != 0 {
+                    let (order, ne) = order4(h.map(|x| x.1), hm);
                     // Far to near, so the nearest is taken first.
                     for i in (1..ne).rev() {
                         let s = order[i] as usize;
