@@ -220,12 +220,25 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
     /// Visits, per lane, the children listed that enter before `lower`
     /// (strictly: a later one may tie), nearest first; the lane's range
     /// end follows its walk.
+    // Most settles find nothing to take: the lanes that can take a child are
+    // picked in one pass of compares, inlined into the walk, and the lanes'
+    // visits are a call only when some lane takes one.
+    #[inline(always)]
     fn settle(&mut self, lower: f32, thi: &mut [f32; 8]) {
-        // Most settles find nothing to take: the lanes that can take a child
-        // are picked in one pass of compares, not one branch per lane.
         let l = Vec4::splat(lower);
         let ge = |h: usize| Vec4::from_slice(&self.first[4 * h..4 * h + 4]).cmpge(l).bitmask();
-        let mut m = !(ge(0) | ge(1) << 4) & self.lanes;
+        let m = !(ge(0) | ge(1) << 4) & self.lanes;
+        if m != 0 {
+            self.take(m, lower, thi);
+        }
+    }
+}
+
+impl LaneWalks<'_, '_, '_> {
+    /// [`settle`](Visit8::settle) for the lanes `m`, each of which has a
+    /// child listed that enters before `lower`.
+    #[inline(never)]
+    fn take(&mut self, mut m: u32, lower: f32, thi: &mut [f32; 8]) {
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
