@@ -13,12 +13,13 @@
 //! spend most of their time walking the node's tree, and the neighbouring
 //! rays of a packet walk mostly the same nodes.
 
+use glam::Vec4;
 use rothray_primitives::{
     box_wide::{forms_packet, Lanes8, Rays8, Visit8},
     LeafTable, Ray,
 };
 
-use super::{counts, sort_cands, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
+use super::{cand_key, cand_of_key, counts, sort_keys, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
 use crate::spans::SpanList;
 
 /// The wide unions walked for the current packet, and what walking one more
@@ -32,7 +33,7 @@ pub(crate) struct UnionRecords {
     recs: Vec<MemoLeaf>,
     len: usize,
     accs: Vec<SpanList>,
-    cands: Vec<Vec<(u32, f32)>>,
+    cands: Vec<Vec<u64>>,
     leaf: SpanList,
     tmp: SpanList,
 }
@@ -88,7 +89,7 @@ impl PacketMemo {
         }
         let (v, spans) = (e.valid[k], &e.spans[k]);
         if v <= hi {
-            out.0.extend_from_slice(spans);
+            out.append(spans);
         } else if !(spans.is_empty() && v == f32::INFINITY) {
             counts::packet_lane(false);
             return None;
@@ -131,7 +132,7 @@ impl UnionRecords {
             walk.accs[k].clear();
             walk.cands[k].clear();
             if lanes & (1 << k) != 0 && !w.unbounded.is_empty() {
-                walk.cands[k].extend(w.unbounded.iter().map(|&pos| (pos, tmin[k])));
+                walk.cands[k].extend(w.unbounded.iter().map(|&pos| cand_key(pos, tmin[k])));
                 walk.first[k] = tmin[k];
             }
         }
@@ -163,7 +164,8 @@ pub const PACKET_UNION_MIN: u32 = 32;
 impl Program {
     /// Is node `n` a wide union of at least [`PACKET_UNION_MIN`] leaves with
     /// a packet tree (what [`PacketMemo::walk_unions_for`] lets packets walk
-    /// together)?
+    /// together)? (Asked by every lane's every union query: inlined.)
+    #[inline]
     pub fn is_packet_union(&self, n: u32) -> bool {
         let nu = n as usize;
         self.kind[nu] == NodeKind::Union
@@ -189,14 +191,17 @@ struct LaneWalks<'p, 'c, 's> {
     tmax: [f32; 8],
     /// Per lane, the smallest entry among its `cands`.
     first: [f32; 8],
-    /// Per lane, the children listed and not visited yet.
-    cands: &'s mut [Vec<(u32, f32)>],
+    /// Per lane, the children listed and not visited yet, as keys
+    /// ([`cand_key`]: sorting them is sorting integers).
+    cands: &'s mut [Vec<u64>],
     accs: &'s mut [SpanList],
     lists: (&'s mut SpanList, &'s mut SpanList),
 }
 
 impl Visit8 for LaneWalks<'_, '_, '_> {
-    #[inline]
+    // Inlined into the walk: one call less per leaf box, and the box test
+    // is compiled with the walk's AVX.
+    #[inline(always)]
     fn visit(&mut self, pos: u32, lanes: u32, rays: &Lanes8) {
         // Each lane's entry into the child's own box, as `child_entry` gives it.
         let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
@@ -206,7 +211,7 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             if t0[k] <= self.st[k].hi {
-                self.cands[k].push((pos, t0[k]));
+                self.cands[k].push(cand_key(pos, t0[k]));
                 self.first[k] = self.first[k].min(t0[k]);
             }
         }
@@ -215,21 +220,36 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
     /// Visits, per lane, the children listed that enter before `lower`
     /// (strictly: a later one may tie), nearest first; the lane's range
     /// end follows its walk.
+    // Most settles find nothing to take: the lanes that can take a child are
+    // picked in one pass of compares, inlined into the walk, and the lanes'
+    // visits are a call only when some lane takes one.
+    #[inline(always)]
     fn settle(&mut self, lower: f32, thi: &mut [f32; 8]) {
-        let mut m = self.lanes;
+        let l = Vec4::splat(lower);
+        let ge = |h: usize| Vec4::from_slice(&self.first[4 * h..4 * h + 4]).cmpge(l).bitmask();
+        let m = !(ge(0) | ge(1) << 4) & self.lanes;
+        if m != 0 {
+            self.take(m, lower, thi);
+        }
+    }
+}
+
+impl LaneWalks<'_, '_, '_> {
+    /// [`settle`](Visit8::settle) for the lanes `m`, each of which has a
+    /// child listed that enters before `lower`.
+    #[inline(never)]
+    fn take(&mut self, mut m: u32, lower: f32, thi: &mut [f32; 8]) {
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
-            if self.first[k] >= lower {
-                continue; // nothing listed can be taken yet
-            }
             let cand = &mut self.cands[k];
-            sort_cands(cand);
+            sort_keys(cand);
             let st = &mut self.st[k];
             let ask = Ask { leaves: self.leaves, ctx: &self.ctx[k], mode: Mode::Nearest };
             let tmin = self.ctx[k].ray.tmin;
             let mut used = 0;
-            for &(pos, t0) in cand.iter() {
+            for &key in cand.iter() {
+                let (pos, t0) = cand_of_key(key);
                 if t0 >= lower || t0 > st.hi {
                     break;
                 }
@@ -237,12 +257,12 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
                 let (leaf, tmp) = (&mut *self.lists.0, &mut *self.lists.1);
                 self.prog.union_visit(self.n, pos, ask, tmin, st, (leaf, tmp, &mut self.accs[k]));
             }
-            if used < cand.len() && cand[used].1 > st.hi {
+            if used < cand.len() && cand_of_key(cand[used]).1 > st.hi {
                 cand.clear(); // sorted: the rest lies past the lane's end
             } else {
                 cand.drain(..used);
             }
-            self.first[k] = cand.first().map_or(f32::INFINITY, |c| c.1);
+            self.first[k] = cand.first().map_or(f32::INFINITY, |&c| cand_of_key(c).1);
             thi[k] = thi[k].min(st.hi);
         }
     }

@@ -246,8 +246,11 @@ impl BoxWide {
     fn walk8_in<const AVX: bool>(&self, p: &Packet8, tmin: &[f32; 8], active: u32, thi: &mut [f32; 8], v: &mut impl Visit8) {
         let tlo = F8(*tmin);
         let mut hi = F8(*thi);
-        // (child code, lanes that reached it, their smallest entry parameter)
-        let mut stack: SmallVec<[(u32, u32, f32); 64]> = SmallVec::new();
+        // (child code, lanes that reached it, their smallest entry parameter,
+        // the smallest of those parameters from the bottom of the stack up to
+        // this entry: what is left is entered no earlier, read at every pop
+        // without a pass over the stack)
+        let mut stack: SmallVec<[(u32, u32, f32, f32); 64]> = SmallVec::new();
         let (mut cur, mut mask) = (0u32, active & hi.ge_mask(&tlo));
         if mask == 0 {
             return;
@@ -270,12 +273,22 @@ impl BoxWide {
                 for (s, &(m, _)) in h.iter().enumerate() {
                     hm |= ((m & mask != 0) as u32) << s;
                 }
-                let (order, ne) = order4(h.map(|x| x.1), hm);
-                if ne > 0 {
+                if hm.is_power_of_two() {
+                    // One child met: no order to sort out (`order4` would put
+                    // it first).
+                    let s = hm.trailing_zeros() as usize;
+                    (cur, mask) = (n.child(s as u32), h[s].0 & mask);
+                    continue;
+                }
+                // None met: nothing to sort either, on to the deferred subtrees.
+                if hm != 0 {
+                    let (order, ne) = order4(h.map(|x| x.1), hm);
                     // Far to near, so the nearest is taken first.
                     for i in (1..ne).rev() {
                         let s = order[i] as usize;
-                        stack.push((n.child(s as u32), h[s].0 & mask, h[s].1));
+                        let t = h[s].1;
+                        let below = stack.last().map_or(t, |e| e.3.min(t));
+                        stack.push((n.child(s as u32), h[s].0 & mask, t, below));
                     }
                     let s = order[0] as usize;
                     (cur, mask) = (n.child(s as u32), h[s].0 & mask);
@@ -283,7 +296,7 @@ impl BoxWide {
                 }
             }
             loop {
-                let Some(&(_, _, t_top)) = stack.last() else {
+                let Some(&(_, _, _, lower)) = stack.last() else {
                     v.settle(f32::INFINITY, &mut hi.0);
                     *thi = hi.0;
                     return;
@@ -291,9 +304,8 @@ impl BoxWide {
                 // Every entry left is at least the smallest deferred one.
                 // (A child's entry is at least its node's: the same arithmetic
                 // on planes inside the node's. The margin is for safety only.)
-                let lower = stack.iter().fold(t_top, |m, e| m.min(e.2));
                 v.settle(lower - lower.abs() * SLAB_EPS, &mut hi.0);
-                let (c, m, t) = stack.pop().expect("not empty");
+                let (c, m, t, _) = stack.pop().expect("not empty");
                 // Lanes whose range now ends before it drop out.
                 let m2 = hi.reaching(t) & m;
                 if m2 != 0 {

@@ -452,12 +452,8 @@ impl F8 {
     /// lanes of a packet walk that still need that subtree.
     #[inline(always)]
     pub(crate) fn reaching(&self, t: f32) -> u32 {
-        let tt = t - t.abs() * super::SLAB_EPS;
-        let mut m = 0;
-        for k in 0..8 {
-            m |= ((tt <= self.0[k]) as u32) << k;
-        }
-        m
+        let tt = Vec4::splat(t - t.abs() * super::SLAB_EPS);
+        tt.cmple(self.half(0)).bitmask() | tt.cmple(self.half(1)).bitmask() << 4
     }
 
     /// Bit k set where lane k of `self` >= lane k of `other` (false on NaN).
