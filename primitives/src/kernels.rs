@@ -412,8 +412,20 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
         if e0.lo() > w_hi {
             break; // this run and the rest lie past it
         }
+        // A root whose piece straddles an end of the window lies on the side
+        // the quartic's sign there says (the piece is monotone): a shadow
+        // ray leaving the surface skips the root at its origin this way.
+        let inside_at = |s: f64| quartic::value(&c, s) < 0.0;
+        if e1.lo() < w_lo && !inside_at(w_lo) {
+            continue; // the run ends before the window
+        }
+        if e0.hi() > w_hi && !inside_at(w_hi) {
+            break; // the run starts past the window
+        }
+        let need0 = e0.hi() >= w_lo && !(e0.lo() < w_lo && inside_at(w_lo));
+        let need1 = e1.lo() <= w_hi && !(e1.hi() > w_hi && inside_at(w_hi));
         // An end outside the window stands in for the root there.
-        let (x0, x1) = match (e0.hi() >= w_lo, e1.lo() <= w_hi) {
+        let (x0, x1) = match (need0, need1) {
             (true, true) => quartic::RunEnd::polish_pair(&c, e0, e1, eps),
             (true, false) => (e0.polish(&c, eps), e1.hi()),
             (false, true) => (e0.lo(), e1.polish(&c, eps)),

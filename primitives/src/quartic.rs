@@ -20,6 +20,12 @@ fn q(c: &[f64; 3], s: f64) -> f64 {
     ((s * s + c[2]) * s + c[1]) * s + c[0]
 }
 
+/// `s^4 + c[2] s^2 + c[1] s + c[0]` at `s` (by Horner, as the root finding).
+#[inline(always)]
+pub fn value(c: &[f64; 3], s: f64) -> f64 {
+    q(c, s)
+}
+
 /// `q(s)` and `q'(s)`.
 #[inline(always)]
 fn q_d(c: &[f64; 3], s: f64) -> (f64, f64) {
