@@ -973,8 +973,11 @@ impl LeafTable {
         let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
         if self.kind[iu] == LeafKind::Sphere {
+            // The point relative to the centre in f64 (a small ball far out is
+            // a small difference of world points), then normalised in f32
+            // like any local normal (f32 keeps its direction to 6e-8).
             let (q, _) = self.ball_frame(iu, o);
-            return (q + d.as_dvec3() * t as f64).try_normalize().map_or(Vec3::Y, |n| n.as_vec3());
+            return unit((q + d.as_dvec3() * t as f64).as_vec3());
         }
         if self.kind[iu] == LeafKind::Torus {
             // The local point in f64, as its spans: the tube of a thin torus is
@@ -1037,6 +1040,17 @@ fn world_normal(m: &Affine3A, nl: Vec3) -> Vec3 {
     }
     let n = m.matrix3.as_dmat3().transpose() * nl.as_dvec3();
     n.try_normalize().map_or(Vec3::Y, |n| n.as_vec3())
+}
+
+/// `n` normalised (`+y` for a zero vector): in f32 where its squared
+/// length is in f32's comfortable range, else in f64 (as [`world_normal`]).
+#[inline]
+fn unit(n: Vec3) -> Vec3 {
+    let l2 = n.length_squared();
+    if (1e-30..=1e30).contains(&l2) {
+        return n.normalize_or(Vec3::Y);
+    }
+    n.as_dvec3().try_normalize().map_or(Vec3::Y, |n| n.as_vec3())
 }
 
 /// Clips `[t0, t1]` to `[tmin, tmax]` and pushes it if it keeps a positive length.
