@@ -178,6 +178,11 @@ enum Cmd {
         /// Trace camera rays only (no shadow rays), like POV-Ray at +Q0.
         #[arg(long)]
         no_shadows: bool,
+        /// Trace every ray alone: no packet walks of wide unions or meshes, no
+        /// leaf solved for eight rays at once (the same picture; for measuring
+        /// what packets gain).
+        #[arg(long)]
+        ray_by_ray: bool,
         /// Print one JSON object as the last line (times, rays, and `counters`: what the
         /// tiles skipped and what the evaluation did in the last render).
         #[arg(long)]
@@ -467,8 +472,9 @@ fn run(cli: Cli) -> Result<()> {
             let run = bench_knob::KnobRun { knob, values: &tolerances, image, repeats, plot: plot.as_deref(), json };
             bench_knob::bench_knob(&sf, &run)
         }
-        Cmd::Bench { scene, image, repeats, json, no_shadows, tile, split, files, .. } => {
-            let (sf, rs, bake) = load(&scene, &files)?;
+        Cmd::Bench { scene, image, repeats, json, no_shadows, ray_by_ray, tile, split, files, .. } => {
+            let (sf, mut rs, bake) = load(&scene, &files)?;
+            rs.set_ray_by_ray(ray_by_ray);
             let mut s = settings(&sf, image, Aov::Shaded)?;
             if let Some((index, count)) = tile {
                 s.part = Part { index, count, split: split_of(split) };
@@ -509,6 +515,7 @@ fn run(cli: Cli) -> Result<()> {
                     "tile": [s.part.index, s.part.count],
                     "split": s.part.split.name(),
                     "shadows": !no_shadows,
+                    "ray_by_ray": ray_by_ray,
                     "rays": rays,
                     "camera_rays": stats.primary_rays,
                     "shadow_rays": stats.shadow_rays,

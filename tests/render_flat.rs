@@ -38,3 +38,40 @@ fn flat_pictures_match_single_ray_hits() {
         assert!(hits > (w * h / 20) as usize, "{name}: too few hits to mean anything");
     }
 }
+
+/// Packets change no pixel: scenes of every kind the packets serve (wide
+/// unions, meshes, analytic leaves solved eight at a time, tori that go ray
+/// by ray), shaded with shadows, rendered with packets and ray by ray
+/// ([`RenderScene::set_ray_by_ray`]) are byte-identical.
+#[test]
+fn packets_and_ray_by_ray_render_the_same_pictures() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    for (path, w, h) in [
+        ("benches/scenes/forest.json", 240u32, 135u32),
+        ("benches/scenes/capsules.json", 240, 135),
+        ("benches/scenes/mesh_cut.json", 240, 135),
+        ("benches/scenes/tori.json", 240, 135),
+        ("scenes/cheese.json", 240, 135),
+        ("scenes/bunny.json", 160, 90),
+    ] {
+        let sf = rothray::io::load_scene(std::path::Path::new(&format!("{root}/{path}"))).expect("scene");
+        let mut scene = RenderScene::from_world(&sf.world).expect("bake");
+        let s = RenderSettings {
+            width: w,
+            height: h,
+            spp: 1,
+            aov: Aov::Shaded,
+            background: sf.background,
+            lights: sf.lights.clone(),
+            ambient: 0.1,
+            part: rothray_engine::Part::WHOLE,
+        };
+        let (packets, st) = render(&scene, &sf.camera, &s, &|_, _| {});
+        scene.set_ray_by_ray(true);
+        let (alone, _) = render(&scene, &sf.camera, &s, &|_, _| {});
+        let differ = packets.chunks(3).zip(alone.chunks(3)).filter(|(a, b)| a != b).count();
+        println!("{path}: {} camera and {} shadow rays, {differ} pixels differ", st.primary_rays, st.shadow_rays);
+        assert!(st.shadow_rays > 0, "{path}: no shadow rays: the lit path is not exercised");
+        assert_eq!(differ, 0, "{path}: packets and ray by ray differ");
+    }
+}

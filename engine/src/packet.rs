@@ -312,6 +312,12 @@ impl RenderScene {
         if n == 0 {
             return;
         }
+        if self.ray_by_ray {
+            for k in 0..n {
+                out[k] = self.intersect_ray(&rays[k], &mut ps.scratch, normals, tile);
+            }
+            return;
+        }
         let o = rays[0].origin;
         // `is_valid` for each ray, with the shared origin checked once.
         let meshes = n == 8
@@ -453,7 +459,7 @@ impl RenderScene {
     pub fn occluded_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [bool], tile: Option<&TileView>) {
         let n = rays.len().min(out.len());
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
-        if n == 8 && shares_work(tile) && rays.iter().all(plain) {
+        if n == 8 && !self.ray_by_ray && shares_work(tile) && rays.iter().all(plain) {
             let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
             ready_memo(&mut ps.memo, &ctx, tile);
             let memo = &ps.memo;

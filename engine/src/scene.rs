@@ -110,6 +110,8 @@ pub struct RenderScene {
     pub(crate) redo_window: Vec<f32>,
     /// The packet shortcut (see [`Shortcut`]), for scenes with few leaves.
     pub(crate) shortcut: Option<crate::packet::Shortcut>,
+    /// Packet queries go ray by ray (see [`RenderScene::set_ray_by_ray`]).
+    pub(crate) ray_by_ray: bool,
 }
 
 thread_local! {
@@ -126,6 +128,16 @@ struct ObjRef<'a> {
 }
 
 impl RenderScene {
+    /// With `on`, packet queries ([`RenderScene::intersect_packet`], the
+    /// renderer's camera and shadow packets) trace each ray alone: no packet
+    /// walks of wide unions or meshes, no leaf solved for eight rays at once.
+    /// The answers are the same bit for bit (tests/render_flat.rs); this is
+    /// for measuring what the packets gain (`rothray bench --ray-by-ray`).
+    /// Off after a bake; a [`crate::sync_scene`] keeps it.
+    pub fn set_ray_by_ray(&mut self, on: bool) {
+        self.ray_by_ray = on;
+    }
+
     /// The world bounds of the leaves `leaves` (rows of the leaf table),
     /// read from their program nodes: the bake keeps the leaves' bounds
     /// there only.
