@@ -279,12 +279,10 @@ pub fn torus(o: Vec3, d: Vec3, rho: f32, out: &mut [(f32, f32); 3]) -> usize {
 
 /// The torus polish tolerance a bake uses (the `torus` knob's default),
 /// relative to the minor radius: on `benches/scenes/tori.json` (README, "Run
-/// time against error") 1e-7 is the coarsest setting whose nearest hits
-/// equal full f64 polishing's on every error ray (1e-6 is off by 9e-8 of
-/// the scene's size, one f32 ulp). A root's Newton stops once its step's
-/// quadratic convergence puts the next iterate within the tolerance, so
-/// each root is about as good as the tolerance says, no better.
-pub const TORUS_TOLERANCE: f32 = 1e-7;
+/// time against error") 1e-4 already gives the nearest hits of full f64
+/// polishing on every error ray; the default keeps two decades of margin
+/// (full polishing traces 32% slower: 0.0092 s against 0.0069 s at 480x270).
+pub const TORUS_TOLERANCE: f32 = 1e-6;
 
 /// [`torus`] with the roots polished only to `tol` times the minor radius
 /// `rho` (the tube's size: a thin tube's roots are as good relative to it
@@ -367,8 +365,11 @@ impl TorusLine {
 
     /// The window in `s` whose roots can matter on the `t` range: a root
     /// outside it lands outside the range once converted to f32 (the margin,
-    /// 1e-6 relative, is far above f32 rounding and f64 error), so clipping
-    /// makes any stand-in beyond it give the same span.
+    /// 1e-6 of the range end's distance plus 1e-12 of the line's scale, is
+    /// above f32 rounding and f64 error), so clipping makes any stand-in
+    /// beyond it give the same span as the exact root would. (Against the
+    /// root polished to the tolerance, the same up to that tolerance: near
+    /// `t = 0` the margin is smaller than it.)
     #[inline(always)]
     fn window(&self, (tmin, tmax): (f32, f32)) -> (f64, f64) {
         let slack = |t: f32| 1e-6 * (t.abs() as f64 * self.dl) + 1e-12 * (self.tc.abs() + self.h);

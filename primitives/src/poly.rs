@@ -305,10 +305,10 @@ pub(crate) enum Proposal {
 /// The next iterate `nx`, whether it is a Newton step (not a bisection),
 /// its length `s` and the tolerance `tol` it was measured against.
 pub(crate) struct Next {
-    pub(crate) nx: f64,
-    pub(crate) newton: bool,
-    pub(crate) s: f64,
-    pub(crate) tol: f64,
+    nx: f64,
+    newton: bool,
+    s: f64,
+    tol: f64,
 }
 
 impl Bracket {

@@ -519,8 +519,9 @@ pub struct LeafTable {
     /// Per torus (indexed by `ext`), its world-to-local map in f64: the
     /// linear part and the anchor's local point (see [`LeafTable::spans_in`]).
     pub torus_maps: Vec<(DMat3, DVec3)>,
-    /// Polish tolerance of the torus roots (see [`kernels::torus_tol`]; 0, the
-    /// default, is full f64 precision).
+    /// Polish tolerance of the torus roots, relative to the minor radius (see
+    /// [`kernels::torus_tol`]; a bake sets [`kernels::TORUS_TOLERANCE`] unless
+    /// the `torus` knob says otherwise; 0 is full f64 precision).
     pub torus_tol: f64,
 }
 
