@@ -425,12 +425,14 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
         }
         let need0 = e0.hi() >= w_lo && !(e0.lo() < w_lo && inside_at(w_lo));
         let need1 = e1.lo() <= w_hi && !(e1.hi() > w_hi && inside_at(w_hi));
-        // An end outside the window stands in for the root there.
+        // An end outside the window is not polished: it lies beyond the
+        // range's end, and infinity says so to the caller's clip whatever
+        // the rounding (a stand-in converted to t could round onto tmin).
         let (x0, x1) = match (need0, need1) {
             (true, true) => quartic::RunEnd::polish_pair(&c, e0, e1, eps),
-            (true, false) => (e0.polish(&c, eps), e1.hi()),
-            (false, true) => (e0.lo(), e1.polish(&c, eps)),
-            (false, false) => (e0.lo(), e1.hi()),
+            (true, false) => (e0.polish(&c, eps), f64::INFINITY),
+            (false, true) => (f64::NEG_INFINITY, e1.polish(&c, eps)),
+            (false, false) => (f64::NEG_INFINITY, f64::INFINITY),
         };
         let (t0, t1) = (line.t(x0), line.t(x1));
         out[count] = (t0, t1);
