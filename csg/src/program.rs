@@ -320,23 +320,10 @@ pub(crate) fn cand_of_key(k: u64) -> (u32, f32) {
     (k as u32, f32::from_bits(b))
 }
 
-/// Sorts candidate keys ([`cand_key`]); short lists, which the walks list
-/// nearly in order, by insertion.
+/// Sorts candidate keys ([`cand_key`]).
 #[inline]
 pub(crate) fn sort_keys(s: &mut [u64]) {
-    if s.len() > 16 {
-        s.sort_unstable();
-        return;
-    }
-    for i in 1..s.len() {
-        let c = s[i];
-        let mut j = i;
-        while j > 0 && s[j - 1] > c {
-            s[j] = s[j - 1];
-            j -= 1;
-        }
-        s[j] = c;
-    }
+    sort_short_by_key(s, |&k| k);
 }
 
 /// Sorts candidates by entry, then position: a total order, so they are
@@ -345,12 +332,17 @@ pub(crate) fn sort_keys(s: &mut [u64]) {
 pub(crate) fn sort_cands(s: &mut [(u32, f32)]) {
     // One integer key per candidate ([`cand_key`]): one compare instead of
     // two chained ones.
-    let key = |c: &(u32, f32)| cand_key(c.0, c.1);
+    sort_short_by_key(s, |c| cand_key(c.0, c.1));
+}
+
+/// Sorts `s` by `key`; short lists, which the walks list nearly in order,
+/// by insertion.
+#[inline(always)]
+fn sort_short_by_key<T: Copy, K: Ord>(s: &mut [T], key: impl Fn(&T) -> K) {
     if s.len() > 16 {
         s.sort_unstable_by_key(key);
         return;
     }
-    // Short lists, listed nearly in order by the walks: insertion sort.
     for i in 1..s.len() {
         let c = s[i];
         let kc = key(&c);
