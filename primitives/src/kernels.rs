@@ -382,8 +382,8 @@ impl TorusLine {
 
 /// The torus's spans for `ask`, with the place up to which they are exact:
 /// `f32::INFINITY`, or with `first_only` the end of the first span the range
-/// keeps that starts in the range, when later spans were left out. Spans may reach past the range
-/// (the caller clips).
+/// keeps that starts in the range, when later spans were left out. Spans
+/// may reach past the range (the caller clips).
 ///
 /// A ring torus (`rho < 1`) is inside exactly where the quartic is negative
 /// (q factors into `((r-1)^2 + z^2 - rho^2) ((r+1)^2 + z^2 - rho^2)`, whose
@@ -395,12 +395,12 @@ impl TorusLine {
 /// every root, by classifying the points between them.
 pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &mut [(f32, f32); 3]) -> (usize, f32) {
     let rho = shape.0 as f64;
+    if rho >= 1.0 {
+        return (torus_by_midpoints(o, d, shape, out), f32::INFINITY);
+    }
     let Some(line) = TorusLine::new(o, d, rho) else { return (0, f32::INFINITY) };
     let c = line.quartic(rho);
     let eps = shape.1 * rho;
-    if rho >= 1.0 {
-        return (spindle_spans(&line, &c, (rho, eps), out), f32::INFINITY);
-    }
     let mut runs = [(quartic::RunEnd::Exact(0.0), quartic::RunEnd::Exact(0.0)); 3];
     let nr = quartic::negative_runs(&c, line.h, &mut runs);
     let (w_lo, w_hi) = line.window(ask.range);
@@ -416,7 +416,7 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
         // A root whose piece straddles an end of the window lies on the side
         // the quartic's sign there says (the piece is monotone): a shadow
         // ray leaving the surface skips the root at its origin this way.
-        let inside_at = |s: f64| quartic::value(&c, s) < 0.0;
+        let inside_at = |s: f64| quartic::q(&c, s) < 0.0;
         if e1.lo() < w_lo && !inside_at(w_lo) {
             continue; // the run ends before the window
         }
@@ -449,8 +449,8 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
 }
 
 /// The spans from every root, the pieces between them classified by their
-/// midpoints (the spindle torus's path, for any torus): the reference the
-/// ring torus's lazy path is tested against.
+/// midpoints: the spindle torus's path, and for a ring torus the reference
+/// its lazy path is tested against.
 #[doc(hidden)]
 pub fn torus_by_midpoints(o: DVec3, d: DVec3, shape: (f32, f64), out: &mut [(f32, f32); 3]) -> usize {
     let rho = shape.0 as f64;

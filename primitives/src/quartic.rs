@@ -16,14 +16,8 @@ use crate::poly::Bracket;
 /// `q(s)` by Horner, in the same order as [`crate::poly::eval`] on
 /// `[c0, c1, c2, 0, 1]` (the same rounding as the generic path).
 #[inline(always)]
-fn q(c: &[f64; 3], s: f64) -> f64 {
+pub(crate) fn q(c: &[f64; 3], s: f64) -> f64 {
     ((s * s + c[2]) * s + c[1]) * s + c[0]
-}
-
-/// `s^4 + c[2] s^2 + c[1] s + c[0]` at `s` (by Horner, as the root finding).
-#[inline(always)]
-pub fn value(c: &[f64; 3], s: f64) -> f64 {
-    q(c, s)
 }
 
 /// `q(s)` and `q'(s)`.
@@ -163,14 +157,6 @@ fn seed(c: &[f64; 3], (a, fa, flat_a): (f64, f64, bool), (b, fb, flat_b): (f64, 
     }
 }
 
-/// A root as found while walking the monotone pieces: exact (q is 0 at an
-/// end or a critical point) or still to be polished in its bracket.
-#[derive(Clone, Copy)]
-enum Found {
-    Exact(f64),
-    Polish(Bracket),
-}
-
 /// The quartic's breakpoints on `[-h, h]`, increasing: the ends and the
 /// critical points strictly inside, with the values there. Between two
 /// consecutive ones the quartic is monotone.
@@ -207,7 +193,7 @@ impl Marks {
 
 /// A monotone piece whose ends' values have opposite signs: one root inside.
 #[derive(Clone, Copy)]
-pub struct Piece {
+pub(crate) struct Piece {
     a: (f64, f64, bool),
     b: (f64, f64, bool),
 }
@@ -229,19 +215,19 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
     }
     let m = Marks::new(c, h);
     // First every bracket (cheap), then the polishing, two at a time.
-    let mut found = [Found::Exact(0.0); 4];
+    let mut found = [RunEnd::Exact(0.0); 4];
     let mut nf = 0;
     if m.f[0] == 0.0 {
-        found[0] = Found::Exact(-h);
+        found[0] = RunEnd::Exact(-h);
         nf = 1;
     }
     for j in 0..m.n - 1 {
         let (fa, fb) = (m.f[j], m.f[j + 1]);
         if fb == 0.0 {
-            found[nf] = Found::Exact(m.x[j + 1]);
+            found[nf] = RunEnd::Exact(m.x[j + 1]);
             nf += 1;
         } else if fa != 0.0 && (fa < 0.0) != (fb < 0.0) {
-            found[nf] = Found::Polish(m.piece(j).bracket(c));
+            found[nf] = RunEnd::Root(m.piece(j));
             nf += 1;
         }
         if nf >= 4 {
@@ -252,19 +238,15 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
     let mut pending: Option<usize> = None;
     for k in 0..nf {
         match found[k] {
-            Found::Exact(x) => roots[k] = x,
-            Found::Polish(br) => match pending.take() {
+            RunEnd::Exact(x) => roots[k] = x,
+            RunEnd::Root(_) => match pending.take() {
                 None => pending = Some(k),
-                Some(j) => {
-                    let Found::Polish(first) = found[j] else { unreachable!() };
-                    (roots[j], roots[k]) = refine_pair(c, first, br, eps);
-                }
+                Some(j) => (roots[j], roots[k]) = RunEnd::polish_pair(c, found[j], found[k], eps),
             },
         }
     }
     if let Some(j) = pending {
-        let Found::Polish(br) = found[j] else { unreachable!() };
-        roots[j] = refine(c, br, eps);
+        roots[j] = found[j].polish(c, eps);
     }
     let mut count = 0;
     for &r in &roots[..nf] {
@@ -279,7 +261,7 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
 /// An end of a run where the quartic is negative: a point where it is 0, or
 /// a root not polished yet, in its piece.
 #[derive(Clone, Copy)]
-pub enum RunEnd {
+pub(crate) enum RunEnd {
     /// Exactly here (a mark where q is 0, or an end of `[-h, h]`).
     Exact(f64),
     /// The one root of this monotone piece.
@@ -289,7 +271,7 @@ pub enum RunEnd {
 impl RunEnd {
     /// The smallest place the end can be.
     #[inline(always)]
-    pub fn lo(self) -> f64 {
+    pub(crate) fn lo(self) -> f64 {
         match self {
             RunEnd::Exact(x) => x,
             RunEnd::Root(p) => p.a.0,
@@ -298,7 +280,7 @@ impl RunEnd {
 
     /// The largest place the end can be.
     #[inline(always)]
-    pub fn hi(self) -> f64 {
+    pub(crate) fn hi(self) -> f64 {
         match self {
             RunEnd::Exact(x) => x,
             RunEnd::Root(p) => p.b.0,
@@ -306,7 +288,7 @@ impl RunEnd {
     }
 
     /// The end, polished to `eps` where it is a root.
-    pub fn polish(self, c: &[f64; 3], eps: f64) -> f64 {
+    pub(crate) fn polish(self, c: &[f64; 3], eps: f64) -> f64 {
         match self {
             RunEnd::Exact(x) => x,
             RunEnd::Root(p) => refine(c, p.bracket(c), eps),
@@ -314,7 +296,7 @@ impl RunEnd {
     }
 
     /// Two ends polished at once ([`refine_pair`]): each as [`RunEnd::polish`] gives it.
-    pub fn polish_pair(c: &[f64; 3], e0: RunEnd, e1: RunEnd, eps: f64) -> (f64, f64) {
+    pub(crate) fn polish_pair(c: &[f64; 3], e0: RunEnd, e1: RunEnd, eps: f64) -> (f64, f64) {
         match (e0, e1) {
             (RunEnd::Root(p0), RunEnd::Root(p1)) => refine_pair(c, p0.bracket(c), p1.bracket(c), eps),
             _ => (e0.polish(c, eps), e1.polish(c, eps)),
@@ -330,7 +312,7 @@ impl RunEnd {
 /// Each monotone piece between marks is negative before or after its root
 /// as its ends' values say; a mark where q is 0 separates the runs only when
 /// the sign differs on its two sides (a touching double root joins nothing).
-pub fn negative_runs(c: &[f64; 3], h: f64, out: &mut [(RunEnd, RunEnd); 3]) -> usize {
+pub(crate) fn negative_runs(c: &[f64; 3], h: f64, out: &mut [(RunEnd, RunEnd); 3]) -> usize {
     if !(h > 0.0) {
         return 0;
     }
