@@ -28,9 +28,12 @@
 //!   `closest_hit8` (the 4-wide BVH walked once per packet) on camera rays of
 //!   the bunny's view, tiles picked the same way.
 //!
-//! Not here, because it does not exist yet: a SIMD interval merge (packets
-//! combine their span lists lane by lane with the scalar `combine`), and
-//! packet kernels for the cone, the torus, sweeps and generalized cylinders.
+//! * `combine/OP x8 merge (C)/N` (and `... by lane`: without AVX2): the same pairs through
+//!   the 8-lane merge ([`merge8`], lists of capacity C), eight pairs per
+//!   call; per pair, like `combine/OP/N`.
+//!
+//! Not here, because it does not exist yet: packet kernels for the cone,
+//! the torus, sweeps and generalized cylinders.
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -39,6 +42,7 @@ use std::time::Duration;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use glam::Vec3;
 use rand::{rngs::SmallRng, Rng, SeedableRng};
+use rothray::csg::spans8::{merge8, merge8_by_lane, Spans8};
 use rothray::csg::{combine, Op, SpanList};
 use rothray::engine::{tile_size, Camera, CameraRays, PacketScratch, Ray, RenderScene, TileScratch};
 use rothray::primitives::frustum::Frustum;
@@ -220,9 +224,53 @@ fn combine_lists(c: &mut Criterion) {
                     k
                 })
             });
+            // The same pairs, eight lanes per call; capacities that hold
+            // every result (a union of n and n spans has up to 2n).
+            match n {
+                1 => merge8_bench::<2>(&mut g, (op, name), n, &pairs),
+                2 => merge8_bench::<4>(&mut g, (op, name), n, &pairs),
+                4 => merge8_bench::<8>(&mut g, (op, name), n, &pairs),
+                _ => merge8_bench::<16>(&mut g, (op, name), n, &pairs),
+            }
         }
     }
     g.finish();
+}
+
+/// `combine/OP x8 merge (C)/N` (and `... by lane`, the path without AVX2): [`merge8`] on the pairs of
+/// `combine/OP/N`, eight pairs per call, lists of capacity `C`; the same
+/// throughput (pairs), so the times compare directly.
+fn merge8_bench<const C: usize>(
+    g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
+    (op, name): (Op, &str),
+    n: usize,
+    pairs: &[(Vec<Span>, Vec<Span>)],
+) {
+    let packets: Vec<(Spans8<C>, Spans8<C>)> = pairs
+        .chunks(8)
+        .map(|ch| {
+            let (mut a, mut b) = (Spans8::<C>::default(), Spans8::<C>::default());
+            for (k, (x, y)) in ch.iter().enumerate() {
+                assert!(a.set_lane(k, x) && b.set_lane(k, y));
+            }
+            (a, b)
+        })
+        .collect();
+    let eps = [1e-4f32; 8];
+    let mut out = Spans8::<C>::default();
+    type Merge<const C: usize> = fn(Op, &Spans8<C>, &Spans8<C>, &[f32; 8], u32, &mut Spans8<C>) -> u32;
+    for (suffix, f) in [("", merge8::<C> as Merge<C>), (" by lane", merge8_by_lane::<C> as Merge<C>)] {
+        g.bench_with_input(BenchmarkId::new(format!("{name} x8 merge ({C}){suffix}"), n), &packets, |bch, packets| {
+            bch.iter(|| {
+                let mut k = 0u32;
+                for (a, b) in packets {
+                    k += f(op, black_box(a), black_box(b), &eps, 0xff, &mut out);
+                    k += out.len[0];
+                }
+                k
+            })
+        });
+    }
 }
 
 /// Like `benches/scenes/forest.json` (whose union mixes 10 000 spheres and

@@ -19,6 +19,7 @@
 pub mod counts;
 pub mod program;
 pub mod spans;
+pub mod spans8;
 pub mod tile;
 
 pub use counts::{take_eval_counts, EvalCounts};

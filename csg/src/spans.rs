@@ -235,7 +235,9 @@ fn union_fuse(a: (f32, Surf), b: (f32, Surf)) -> (f32, Surf) {
         (true, true) if b.1.leaf_index() < a.1.leaf_index() => b,
         (true, _) => a,
         (false, true) => b,
-        (false, false) => (a.0.min(b.0), a.1),
+        // (`<`, not `f32::min`, whose choice between -0 and +0 is not
+        // specified: the packet merge (`spans8`) must pick the same.)
+        (false, false) => (if b.0 < a.0 { b.0 } else { a.0 }, a.1),
     }
 }
 
