@@ -640,13 +640,14 @@ impl Program {
             return self.eval_frameless(r, ask, (tmin, tmax), Lists { leaf, tmp, acc: out, cand }).min(tmax);
         }
         let base = scratch.frames.len();
-        self.push_frame(root, (tmin, tmax), ctx, mode, scratch);
+        // (The root's box was tested just above, on the same range.)
+        self.push_frame(root, (tmin, tmax), ctx, (mode, true), scratch);
         loop {
             // Pick the next child of the top frame.
             let top = scratch.frames.len() - 1;
             let child = self.next_child(top, ctx, scratch);
             match child {
-                Some(c) => {
+                Some((c, tested)) => {
                     let f = &scratch.frames[top];
                     let (ct0, ct1) = (f.tmin, f.tmax);
                     let mode = self.child_mode(f.node as usize, f.next, f.mode);
@@ -662,7 +663,7 @@ impl Program {
                         let cu = c as usize;
                         let Scratch { frames, accs, tmp, leaf, sub, cand, .. } = scratch;
                         sub.clear();
-                        let valid = if self.bounds[cu].ray_range(ctx.ray.origin, ctx.ray.inv_dir, ct0, ct1).is_none() {
+                        let valid = if !tested && self.bounds[cu].ray_range(ctx.ray.origin, ctx.ray.inv_dir, ct0, ct1).is_none() {
                             f32::INFINITY
                         } else {
                             let ask = Ask { leaves, ctx, mode };
@@ -670,7 +671,7 @@ impl Program {
                         };
                         self.absorb(&mut frames[top], &mut accs[top], tmp, (sub.as_slice(), valid), ctx.eps);
                     } else {
-                        self.push_frame(c, (ct0, ct1), ctx, mode, scratch);
+                        self.push_frame(c, (ct0, ct1), ctx, (mode, tested), scratch);
                     }
                 }
                 None => {
@@ -712,7 +713,10 @@ impl Program {
         }
     }
 
-    fn push_frame(&self, node: u32, (tmin, tmax): (f32, f32), ctx: &RayCtx, mode: Mode, scratch: &mut Scratch) {
+    /// Pushes the frame of `node` on `[tmin, tmax]`; `tested`: its box is
+    /// known to meet that range (the caller tested it on the same range:
+    /// a second test of the same box was ~5% of scenes/logo's instructions).
+    fn push_frame(&self, node: u32, (tmin, tmax): (f32, f32), ctx: &RayCtx, (mode, tested): (Mode, bool), scratch: &mut Scratch) {
         let mut frame = Frame {
             node,
             next: 0,
@@ -731,7 +735,7 @@ impl Program {
         }
         scratch.accs[depth].clear();
         let n = node as usize;
-        if self.bounds[n].ray_range(ctx.ray.origin, ctx.ray.inv_dir, tmin, tmax).is_none() {
+        if !tested && self.bounds[n].ray_range(ctx.ray.origin, ctx.ray.inv_dir, tmin, tmax).is_none() {
             frame.done = true;
         } else if self.kind[n] == NodeKind::Union && self.wide[n] != u32::MAX {
             let lo = scratch.cand.len();
@@ -951,8 +955,11 @@ impl Program {
         sort_cands(&mut cand[lo..]);
     }
 
-    /// The next child node to evaluate for frame `top`, or `None` when it is finished.
-    fn next_child(&self, top: usize, ctx: &RayCtx, scratch: &mut Scratch) -> Option<u32> {
+    /// The next child node to evaluate for frame `top`, or `None` when it is
+    /// finished; with whether its box was tested on the frame's current range
+    /// (a narrow node's children are; a wide node's come from its candidate
+    /// list, made on the range of the time).
+    fn next_child(&self, top: usize, ctx: &RayCtx, scratch: &mut Scratch) -> Option<(u32, bool)> {
         let f = &scratch.frames[top];
         if f.done {
             return None;
@@ -985,7 +992,7 @@ impl Program {
                     f.cand_lo = f.cand_hi;
                     continue;
                 }
-                return Some(self.children[(first + pos) as usize]);
+                return Some((self.children[(first + pos) as usize], false));
             }
             if f.next >= count || (kind == NodeKind::Difference && wide && f.next > 0) {
                 return None;
@@ -1013,7 +1020,7 @@ impl Program {
                     }
                 }
             }
-            return Some(c);
+            return Some((c, true));
         }
     }
 
