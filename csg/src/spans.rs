@@ -1,7 +1,6 @@
 //! Interval lists (Roth diagrams) and the Table-1 combine with regularisation.
 
 use rothray_primitives::{Span, SpanSink, Surf};
-use smallvec::SmallVec;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Inline capacity of a [`SpanList`]: enough for every analytic leaf and for most
@@ -16,58 +15,132 @@ pub fn spill_count() -> u64 {
 }
 
 /// A sorted list of disjoint spans with inline storage (no heap per ray).
-#[derive(Clone, Debug, Default)]
-pub struct SpanList(pub SmallVec<[Span; INLINE_SPANS]>);
+///
+/// Its own inline array and spill vector rather than a `SmallVec`: every
+/// `SmallVec` access branches on where the data lives and reads the length
+/// out of the capacity word, which cost ~7% of scenes/logo's instructions
+/// (callgrind, the `smallvec` lines inlined into the evaluator); here the
+/// inline path of `push`, `as_slice`, `last` and `pop` is one test.
+#[derive(Clone)]
+pub struct SpanList {
+    /// Spans in use: `inline[..len]`, or all of `heap` once spilled.
+    len: usize,
+    spilled: bool,
+    inline: [Span; INLINE_SPANS],
+    heap: Vec<Span>,
+}
+
+/// What unused inline slots hold.
+const NO_SPAN: Span = Span { t0: 0.0, t1: 0.0, s0: Surf::NONE, s1: Surf::NONE };
+
+impl Default for SpanList {
+    fn default() -> Self {
+        SpanList::new()
+    }
+}
+
+impl std::fmt::Debug for SpanList {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list().entries(self.as_slice()).finish()
+    }
+}
 
 impl SpanList {
     /// An empty list.
     #[inline(always)]
     pub fn new() -> Self {
-        SpanList(SmallVec::new())
+        SpanList { len: 0, spilled: false, inline: [NO_SPAN; INLINE_SPANS], heap: Vec::new() }
     }
     /// Appends (keeping order is the caller's job).
     #[inline(always)]
     pub fn push(&mut self, s: Span) {
-        if self.0.len() == INLINE_SPANS {
-            SPILLS.fetch_add(1, Ordering::Relaxed);
+        if !self.spilled && self.len < INLINE_SPANS {
+            self.inline[self.len] = s;
+            self.len += 1;
+        } else {
+            self.push_spilled(s);
         }
-        self.0.push(s);
     }
-    /// Appends `s` (keeping order is the caller's job), span by span:
-    /// `SmallVec::extend_from_slice` (an insert at the end, a call to
-    /// `memcpy`) cost ~80 instructions and `extend` ~58 (not inlined) for
-    /// the one or two spans usually copied (callgrind, scenes/forest).
+    /// [`SpanList::push`] past the inline capacity: the spans move to the heap.
+    #[inline(never)]
+    fn push_spilled(&mut self, s: Span) {
+        if !self.spilled {
+            SPILLS.fetch_add(1, Ordering::Relaxed);
+            self.heap.clear();
+            self.heap.extend_from_slice(&self.inline[..self.len]);
+            self.spilled = true;
+        }
+        self.heap.push(s);
+        self.len += 1;
+    }
+    /// Appends `s` (keeping order is the caller's job), span by span (the
+    /// one or two spans usually copied; a bulk copy is a call to `memcpy`).
     #[inline(always)]
     pub fn append(&mut self, s: &[Span]) {
         for &x in s {
-            self.0.push(x);
+            self.push(x);
         }
     }
     /// Removes every span.
     #[inline(always)]
     pub fn clear(&mut self) {
-        self.0.clear()
+        self.len = 0;
+        if self.spilled {
+            self.spilled = false;
+            self.heap.clear();
+        }
     }
     /// Number of spans.
     #[inline(always)]
     pub fn len(&self) -> usize {
-        self.0.len()
+        self.len
     }
     /// True when the ray is inside nowhere.
     #[inline(always)]
     pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
+        self.len == 0
     }
     /// The spans.
     #[inline(always)]
     pub fn as_slice(&self) -> &[Span] {
-        &self.0
+        if self.spilled {
+            &self.heap
+        } else {
+            &self.inline[..self.len]
+        }
+    }
+    /// The last span.
+    #[inline(always)]
+    pub fn last(&self) -> Option<&Span> {
+        self.as_slice().last()
+    }
+    /// The last span, to change it.
+    #[inline(always)]
+    fn last_mut(&mut self) -> Option<&mut Span> {
+        if self.spilled {
+            self.heap.last_mut()
+        } else {
+            self.inline[..self.len].last_mut()
+        }
+    }
+    /// Removes the last span.
+    #[inline(always)]
+    pub fn pop(&mut self) -> Option<Span> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        if self.spilled {
+            self.heap.pop()
+        } else {
+            Some(self.inline[self.len])
+        }
     }
     /// Clips every span to `t <= tmax` (clipped ends lose their surface).
     pub fn truncate_at(&mut self, tmax: f32) {
-        while let Some(last) = self.0.last_mut() {
+        while let Some(last) = self.last_mut() {
             if last.t0 >= tmax {
-                self.0.pop();
+                self.pop();
             } else {
                 if last.t1 > tmax {
                     last.t1 = tmax;
@@ -208,10 +281,10 @@ pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
         inr = r;
         if r {
             // Entering: merge with the previous span when the gap is below eps.
-            if let Some(last) = out.0.last() {
+            if let Some(last) = out.last() {
                 if t - last.t1 <= eps {
                     start = (last.t0, last.s0);
-                    out.0.pop();
+                    out.pop();
                     continue;
                 }
             }
@@ -247,6 +320,6 @@ pub fn combine_into(op: Op, acc: &mut SpanList, b: &[Span], eps: f32, tmp: &mut 
     combine(op, acc.as_slice(), b, eps, tmp);
     // Copy back the few spans in use; swapping moved two whole inline arrays
     // (2 x 200 bytes) and was ~10% of the logo scene's trace time.
-    acc.0.clear();
+    acc.clear();
     acc.append(tmp.as_slice());
 }
