@@ -61,7 +61,8 @@ impl SpanList {
             self.push_spilled(s);
         }
     }
-    /// [`SpanList::push`] past the inline capacity: the spans move to the heap.
+    /// [`SpanList::push`] past the inline capacity: the spans move to the
+    /// heap (once per list), and go there from then on.
     #[inline(never)]
     fn push_spilled(&mut self, s: Span) {
         if !self.spilled {
@@ -319,7 +320,13 @@ fn union_fuse(a: (f32, Surf), b: (f32, Surf)) -> (f32, Surf) {
 pub fn combine_into(op: Op, acc: &mut SpanList, b: &[Span], eps: f32, tmp: &mut SpanList) {
     combine(op, acc.as_slice(), b, eps, tmp);
     // Copy back the few spans in use; swapping moved two whole inline arrays
-    // (2 x 200 bytes) and was ~10% of the logo scene's trace time.
+    // (2 x 200 bytes) and was ~10% of the logo scene's trace time. A spilled
+    // result (deep nesting: scenes/nesting has up to 80 spans) is swapped:
+    // its spans are on the heap, and a copy would push them one by one.
+    if tmp.spilled {
+        std::mem::swap(acc, tmp);
+        return;
+    }
     acc.clear();
     acc.append(tmp.as_slice());
 }
