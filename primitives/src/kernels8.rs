@@ -16,7 +16,7 @@
 //! ([`crate::table64`]), as the scalar path does (every lane done: f64
 //! needs no rescaling). The cone and the other kinds have no packet kernel.
 
-use glam::{Vec3, Vec3A};
+use glam::{DMat3, Vec3, Vec3A};
 
 use crate::kernels::sub;
 use crate::ray::DIR_SAFE_MAX;
@@ -82,6 +82,12 @@ fn ball<D: D8>(o: &[D; 3], d: &[D; 3], r: f64) -> (D, D, D) {
     let t1 = D::select(q0, zero, q.div(a));
     let keep = t0.le(t1);
     (hit, D::select(keep, t0, t1), D::select(keep, t1, t0))
+}
+
+/// Row `a` of `m v` in `map64`'s order: (x_axis v.x + y_axis v.y) + z_axis v.z.
+#[inline(always)]
+fn map_row<D: D8>(m: &DMat3, a: usize, v: &[D; 3]) -> D {
+    D::splat(m.x_axis[a]).mul(v[0]).add(D::splat(m.y_axis[a]).mul(v[1])).add(D::splat(m.z_axis[a]).mul(v[2]))
 }
 
 /// The all-true f64 mask.
@@ -310,19 +316,17 @@ impl LeafTable {
     /// [`LeafTable::ranges8`] of an ellipsoid or a cylinder, as the scalar
     /// path's `quadric_spans`: the lanes mapped to the leaf's frame in f64
     /// (`local64`, `map64`: `(p - anchor)`, then ((x_axis x + y_axis y) +
-    /// z_axis z), then the anchor's local point), solved in f64.
+    /// z_axis z), then the anchor's local point), solved in f64. (No
+    /// closures here: one compiled apart from this AVX function made every
+    /// AVX operation a call, 10x the instructions.)
     #[inline(always)]
     fn quadrics8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let (m, b) = &self.maps64[self.ext[iu] as usize];
-        let anchor = self.anchor[iu];
-        let c = [anchor.x, anchor.y, anchor.z];
-        let wide = |a: &[f32; 8]| D::load(&a.map(|x| x as f64));
-        let rel: [D; 3] = std::array::from_fn(|a| wide(&rays.o[a]).sub(D::splat(c[a] as f64)));
-        let wd: [D; 3] = std::array::from_fn(|a| wide(&rays.d[a]));
-        let (mx, my, mz) = (m.x_axis, m.y_axis, m.z_axis);
-        let map = |v: &[D; 3], a: usize| D::splat(mx[a]).mul(v[0]).add(D::splat(my[a]).mul(v[1])).add(D::splat(mz[a]).mul(v[2]));
-        let lo: [D; 3] = std::array::from_fn(|a| map(&rel, a).add(D::splat(b[a])));
-        let ld: [D; 3] = std::array::from_fn(|a| map(&wd, a));
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
+        let o = [D::widen(&rays.o[0]).sub(D::splat(c.x)), D::widen(&rays.o[1]).sub(D::splat(c.y)), D::widen(&rays.o[2]).sub(D::splat(c.z))];
+        let d = [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])];
+        let lo = [map_row(m, 0, &o).add(D::splat(b.x)), map_row(m, 1, &o).add(D::splat(b.y)), map_row(m, 2, &o).add(D::splat(b.z))];
+        let ld = [map_row(m, 0, &d), map_row(m, 1, &d), map_row(m, 2, &d)];
         let r = if self.kind[iu] == LeafKind::Cylinder {
             cylinder(&lo, &ld)
         } else {
@@ -330,14 +334,13 @@ impl LeafTable {
             let side = D::splat(sub::SIDE as f64);
             R8 { hit, t0, s0: side, t1, s1: side }
         };
-        let ids = |v: D| v.store().map(|x| x as u32);
         *out = Ranges8 {
             done: lanes,
             hit: r.hit.bitmask() & lanes,
-            t0: r.t0.store().map(|t| t as f32),
-            s0: ids(r.s0),
-            t1: r.t1.store().map(|t| t as f32),
-            s1: ids(r.s1),
+            t0: r.t0.narrow(),
+            s0: r.s0.store_u32(),
+            t1: r.t1.narrow(),
+            s1: r.s1.store_u32(),
         };
     }
 
@@ -348,22 +351,17 @@ impl LeafTable {
     fn balls8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let anchor = self.anchor[iu];
         let (p0, p1) = (self.p0[iu], self.p1[iu]);
-        let wide = |a: &[f32; 8]| D::load(&a.map(|x| x as f64));
         // `ball_frame`: (p - anchor) - p1, in f64; the radius p0.x + p0.y.
-        let c = [anchor.x, anchor.y, anchor.z];
-        let e = [p1.x, p1.y, p1.z];
-        let o: [D; 3] = std::array::from_fn(|a| wide(&rays.o[a]).sub(D::splat(c[a] as f64)).sub(D::splat(e[a] as f64)));
-        let d: [D; 3] = std::array::from_fn(|a| wide(&rays.d[a]));
+        let (c, e) = (Vec3::from(anchor).as_dvec3(), p1.truncate().as_dvec3());
+        let o = [
+            D::widen(&rays.o[0]).sub(D::splat(c.x)).sub(D::splat(e.x)),
+            D::widen(&rays.o[1]).sub(D::splat(c.y)).sub(D::splat(e.y)),
+            D::widen(&rays.o[2]).sub(D::splat(c.z)).sub(D::splat(e.z)),
+        ];
+        let d = [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])];
         let (hit, t0, t1) = ball(&o, &d, p0.x as f64 + p0.y as f64);
         let side = [sub::SIDE; 8];
-        *out = Ranges8 {
-            done: lanes,
-            hit: hit.bitmask() & lanes,
-            t0: t0.store().map(|t| t as f32),
-            s0: side,
-            t1: t1.store().map(|t| t as f32),
-            s1: side,
-        };
+        *out = Ranges8 { done: lanes, hit: hit.bitmask() & lanes, t0: t0.narrow(), s0: side, t1: t1.narrow(), s1: side };
     }
 }
 

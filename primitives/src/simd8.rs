@@ -255,8 +255,12 @@ pub(crate) mod avx {
 /// cylinder; as [`V8`]; masks are all ones or all zeros per lane).
 pub(crate) trait D8: Copy {
     fn splat(x: f64) -> Self;
-    fn load(a: &[f64; 8]) -> Self;
-    fn store(self) -> [f64; 8];
+    /// Eight f32 lanes, widened (exactly).
+    fn widen(a: &[f32; 8]) -> Self;
+    /// The lanes rounded to f32 (to nearest, as `as f32`).
+    fn narrow(self) -> [f32; 8];
+    /// Lanes holding small whole numbers, as integers.
+    fn store_u32(self) -> [u32; 8];
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
@@ -296,14 +300,31 @@ pub(crate) mod sse_d {
             unsafe { SseD([_mm_set1_pd(x); 4]) }
         }
         #[inline(always)]
-        fn load(a: &[f64; 8]) -> Self {
-            unsafe { SseD(std::array::from_fn(|h| _mm_loadu_pd(a.as_ptr().add(2 * h)))) }
+        fn widen(a: &[f32; 8]) -> Self {
+            unsafe {
+                let (lo, hi) = (_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(a.as_ptr().add(4)));
+                SseD([_mm_cvtps_pd(lo), _mm_cvtps_pd(_mm_movehl_ps(lo, lo)), _mm_cvtps_pd(hi), _mm_cvtps_pd(_mm_movehl_ps(hi, hi))])
+            }
         }
         #[inline(always)]
-        fn store(self) -> [f64; 8] {
-            let mut a = [0.0f64; 8];
-            for h in 0..4 {
-                unsafe { _mm_storeu_pd(a.as_mut_ptr().add(2 * h), self.0[h]) };
+        fn narrow(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            unsafe {
+                let lo = _mm_movelh_ps(_mm_cvtpd_ps(self.0[0]), _mm_cvtpd_ps(self.0[1]));
+                let hi = _mm_movelh_ps(_mm_cvtpd_ps(self.0[2]), _mm_cvtpd_ps(self.0[3]));
+                _mm_storeu_ps(a.as_mut_ptr(), lo);
+                _mm_storeu_ps(a.as_mut_ptr().add(4), hi);
+            }
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe {
+                let lo = _mm_unpacklo_epi64(_mm_cvttpd_epi32(self.0[0]), _mm_cvttpd_epi32(self.0[1]));
+                let hi = _mm_unpacklo_epi64(_mm_cvttpd_epi32(self.0[2]), _mm_cvttpd_epi32(self.0[3]));
+                _mm_storeu_si128(a.as_mut_ptr() as *mut __m128i, lo);
+                _mm_storeu_si128(a.as_mut_ptr().add(4) as *mut __m128i, hi);
             }
             a
         }
@@ -402,15 +423,24 @@ pub(crate) mod avx_d {
             unsafe { AvxD([_mm256_set1_pd(x); 2]) }
         }
         #[inline(always)]
-        fn load(a: &[f64; 8]) -> Self {
-            unsafe { AvxD([_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(a.as_ptr().add(4))]) }
+        fn widen(a: &[f32; 8]) -> Self {
+            unsafe { AvxD([_mm256_cvtps_pd(_mm_loadu_ps(a.as_ptr())), _mm256_cvtps_pd(_mm_loadu_ps(a.as_ptr().add(4)))]) }
         }
         #[inline(always)]
-        fn store(self) -> [f64; 8] {
-            let mut a = [0.0f64; 8];
+        fn narrow(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
             unsafe {
-                _mm256_storeu_pd(a.as_mut_ptr(), self.0[0]);
-                _mm256_storeu_pd(a.as_mut_ptr().add(4), self.0[1]);
+                _mm_storeu_ps(a.as_mut_ptr(), _mm256_cvtpd_ps(self.0[0]));
+                _mm_storeu_ps(a.as_mut_ptr().add(4), _mm256_cvtpd_ps(self.0[1]));
+            }
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe {
+                _mm_storeu_si128(a.as_mut_ptr() as *mut __m128i, _mm256_cvttpd_epi32(self.0[0]));
+                _mm_storeu_si128(a.as_mut_ptr().add(4) as *mut __m128i, _mm256_cvttpd_epi32(self.0[1]));
             }
             a
         }
