@@ -7,6 +7,11 @@
 //! `[min, max]`; unit cylinder `x^2+y^2 <= 1, 0 <= z <= 1`; frustum with radius
 //! `ra + (rb - ra) z` on `0 <= z <= 1` (max radius 1); torus around z with major
 //! radius 1 and minor radius `rho` (f64 quartic); half-space `n . p <= offset`.
+//!
+//! Boxes and half-spaces are solved in f32; balls ([`ball`]), ellipsoids
+//! (`ball` of radius 1), cylinders, cones and tori in f64, from lines mapped
+//! in f64 (`crate::table64`), so that tangent chords are those of the f32
+//! inputs. [`sphere`] is the f32 unit sphere, a reference for tests.
 
 use glam::{DVec3, Vec3};
 
@@ -26,8 +31,10 @@ pub mod sub {
 /// ends are allowed (the half-space, a cylinder along its axis).
 pub type Range = (f32, u32, f32, u32);
 
-/// Unit sphere. Uses the closest-approach form of the discriminant (Ray Tracing
-/// Gems, ch. 7), which keeps small, distant spheres accurate in f32.
+/// Unit sphere in f32 (a reference for tests: the leaf table traces
+/// spheres and ellipsoids with [`ball`]). Uses the closest-approach form of
+/// the discriminant (Ray Tracing Gems, ch. 7), which keeps small, distant
+/// spheres accurate in f32.
 #[inline(always)]
 pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
     let a = d.length_squared();
