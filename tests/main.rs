@@ -21,4 +21,5 @@ mod scale_range;
 mod split;
 mod stress;
 mod stress_data;
+mod stress_tangent;
 mod tiles;

@@ -95,6 +95,30 @@ impl Shape {
         }
     }
 
+    /// The same solid moved by `-by`, for the model only (its `json` is
+    /// not moved). With `by` an f32 point near the solid, every f32 number
+    /// of the scene and of a ray moves exactly, and the model's points lose
+    /// 1e-16 of the solid's size instead of 1e-16 of its distance from the
+    /// origin (a ray at 3e-8 rad to a cap 1e3 out: 3e-6 of the size).
+    pub fn moved(&self, by: DVec3) -> Shape {
+        let all = |c: &[Shape]| c.iter().map(|s| s.moved(by)).collect();
+        match self {
+            Shape::Sphere { c, r } => Shape::Sphere { c: *c - by, r: *r },
+            Shape::Box { min, max } => Shape::Box { min: *min - by, max: *max - by },
+            Shape::Cylinder { a, b, r } => Shape::Cylinder { a: *a - by, b: *b - by, r: *r },
+            Shape::Cone { a, b, ra, rb } => Shape::Cone { a: *a - by, b: *b - by, ra: *ra, rb: *rb },
+            Shape::Torus { c, axis, major, minor } => Shape::Torus { c: *c - by, axis: *axis, major: *major, minor: *minor },
+            Shape::Plane { n, d } => Shape::Plane { n: *n, d: d - n.dot(by) },
+            Shape::Octa { c, r, path } => Shape::Octa { c: *c - by, r: *r, path: path.clone() },
+            Shape::Union(c) => Shape::Union(all(c)),
+            Shape::Inter(c) => Shape::Inter(all(c)),
+            Shape::Diff(c) => Shape::Diff(all(c)),
+            Shape::Xf { m, json, s } => {
+                Shape::Xf { m: DAffine3::from_mat3_translation(m.matrix3, m.translation - by), json: json.clone(), s: s.clone() }
+            }
+        }
+    }
+
     pub fn json(&self) -> String {
         match self {
             Shape::Sphere { c, r } => format!("{{\"sphere\":{{\"center\":{},\"radius\":{r:?}}}}}", v(*c)),

@@ -366,9 +366,9 @@ fn copy_leaves(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
                     }
                 }
             }
-            LeafKind::Torus => {
-                dst.torus_maps.push(src.torus_maps[src.ext[a] as usize]);
-                dst.torus_maps.len() - 1
+            k if LeafTable::has_map64(k) => {
+                dst.maps64.push(src.maps64[src.ext[a] as usize]);
+                dst.maps64.len() - 1
             }
             _ => 0,
         };

@@ -1274,9 +1274,9 @@ mod tests {
                 let (o, d) = ((c - v * 3.0).as_vec3(), v.as_vec3());
                 let mut got: Vec<Span> = vec![];
                 g.spans(&Ray::segment(o, d, -1e9, 1e9), 0, &mut got);
-                let lo = inv.transform_point3(o.as_dvec3()).as_vec3();
-                let ld = inv.transform_vector3(d.as_dvec3()).as_vec3();
-                match kernels::cylinder(lo, ld) {
+                let lo = inv.transform_point3(o.as_dvec3());
+                let ld = inv.transform_vector3(d.as_dvec3());
+                match kernels::cylinder(lo, ld).map(kernels::narrow) {
                     Some((t0, s0, t1, s1)) if (t1 - t0) as f64 * v.length() > 1e-4 * size => {
                         hits += 1;
                         assert_eq!(got.len(), 1, "{got:?} vs {t0} {t1}");

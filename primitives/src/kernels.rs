@@ -7,6 +7,11 @@
 //! `[min, max]`; unit cylinder `x^2+y^2 <= 1, 0 <= z <= 1`; frustum with radius
 //! `ra + (rb - ra) z` on `0 <= z <= 1` (max radius 1); torus around z with major
 //! radius 1 and minor radius `rho` (f64 quartic); half-space `n . p <= offset`.
+//!
+//! Boxes and half-spaces are solved in f32; balls ([`ball`]), ellipsoids
+//! (`ball` of radius 1), cylinders, cones and tori in f64, from lines mapped
+//! in f64 (`crate::table64`), so that tangent chords are those of the f32
+//! inputs. [`sphere`] is the f32 unit sphere, a reference for tests.
 
 use glam::{DVec3, Vec3};
 
@@ -26,8 +31,10 @@ pub mod sub {
 /// ends are allowed (the half-space, a cylinder along its axis).
 pub type Range = (f32, u32, f32, u32);
 
-/// Unit sphere. Uses the closest-approach form of the discriminant (Ray Tracing
-/// Gems, ch. 7), which keeps small, distant spheres accurate in f32.
+/// Unit sphere in f32 (a reference for tests: the leaf table traces
+/// spheres and ellipsoids with [`ball`]). Uses the closest-approach form of
+/// the discriminant (Ray Tracing Gems, ch. 7), which keeps small, distant
+/// spheres accurate in f32.
 #[inline(always)]
 pub fn sphere(o: Vec3, d: Vec3) -> Option<Range> {
     let a = d.length_squared();
@@ -111,11 +118,21 @@ pub fn cuboid(o: Vec3, d: Vec3, mn: Vec3, mx: Vec3) -> Option<Range> {
     }
 }
 
+/// [`Range`] in f64: what the f64 kernels ([`cylinder`], [`cone`]) return,
+/// rounded to f32 once, at the end, by [`narrow`].
+pub type Range64 = (f64, u32, f64, u32);
+
+/// `r` with its ends rounded to f32 (the one rounding of an f64 kernel).
+#[inline(always)]
+pub fn narrow(r: Range64) -> Range {
+    (r.0 as f32, r.1, r.2 as f32, r.3)
+}
+
 /// Range of the slab `0 <= z <= 1`.
 #[inline(always)]
-fn slab01(oz: f32, dz: f32) -> Option<Range> {
+fn slab01(oz: f64, dz: f64) -> Option<Range64> {
     if dz == 0.0 {
-        return if (0.0..=1.0).contains(&oz) { Some((f32::NEG_INFINITY, sub::CAP0, f32::INFINITY, sub::CAP1)) } else { None };
+        return if (0.0..=1.0).contains(&oz) { Some((f64::NEG_INFINITY, sub::CAP0, f64::INFINITY, sub::CAP1)) } else { None };
     }
     let ta = -oz / dz;
     let tb = (1.0 - oz) / dz;
@@ -123,7 +140,7 @@ fn slab01(oz: f32, dz: f32) -> Option<Range> {
 }
 
 #[inline(always)]
-fn and(a: Range, b: Range) -> Option<Range> {
+fn and(a: Range64, b: Range64) -> Option<Range64> {
     let (t0, s0) = if a.0 >= b.0 { (a.0, a.1) } else { (b.0, b.1) };
     let (t1, s1) = if a.2 <= b.2 { (a.2, a.3) } else { (b.2, b.3) };
     if t0 <= t1 {
@@ -133,16 +150,21 @@ fn and(a: Range, b: Range) -> Option<Range> {
     }
 }
 
-/// Unit capped cylinder.
+/// Unit capped cylinder, for a line mapped to its frame in f64 (as [`ball`]
+/// and for the same reason: through an f32 map and an f32 closest approach a
+/// tangent chord's ends moved by ~6e-8 r^2 / (L/2), 7e-5 of the view for a
+/// chord of 1e-4 of it, and a ray along a cap's plane crossed it wherever
+/// rounding said; tests/stress_tangent.rs). No rescaling is needed in f64:
+/// |o|^2 <= 1e122, |d|^2 >= 1e-136.
 #[inline(always)]
-pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
+pub fn cylinder(o: DVec3, d: DVec3) -> Option<Range64> {
     let slab = slab01(o.z, d.z)?;
     let a = d.x * d.x + d.y * d.y;
     let side = if a == 0.0 {
         if o.x * o.x + o.y * o.y > 1.0 {
             return None;
         }
-        (f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE)
+        (f64::NEG_INFINITY, sub::SIDE, f64::INFINITY, sub::SIDE)
     } else {
         let b = o.x * d.x + o.y * d.y;
         let fx = o.x - d.x * (b / a);
@@ -152,10 +174,6 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
             return None;
         }
         let c = o.x * o.x + o.y * o.y - 1.0;
-        if c == f32::INFINITY {
-            // As in `sphere`: a chord below f32's resolution, not [t, inf].
-            return None;
-        }
         let q = -(b + disc.sqrt().copysign(b));
         let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
         if t0 <= t1 {
@@ -167,14 +185,12 @@ pub fn cylinder(o: Vec3, d: Vec3) -> Option<Range> {
     and(side, slab)
 }
 
-/// Frustum with radius `ra + (rb - ra) z` over `0 <= z <= 1`.
+/// Frustum with radius `ra + (rb - ra) z` over `0 <= z <= 1`, for a line
+/// mapped to its frame in f64 (see [`cylinder`]; the quadratic's
+/// cancellation near the apex put span ends 1.3e-5 of the view off in f32).
 #[inline(always)]
-pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
+pub fn cone(o: DVec3, d: DVec3, ra: f64, rb: f64) -> Option<Range64> {
     let slab = slab01(o.z, d.z)?;
-    // The quadratic in f64 (the f32 inputs are exact there): in f32 its
-    // cancellation near the apex put span ends 1.3e-5 of the view distance off
-    // (tests/stress.rs, cone with an apex, sizes 1e-6 and 1e3).
-    let (o, d, ra, rb) = (o.as_dvec3(), d.as_dvec3(), ra as f64, rb as f64);
     let k = rb - ra;
     let w0 = ra + k * o.z; // radius at the origin's height
     let wd = k * d.z;
@@ -182,66 +198,72 @@ pub fn cone(o: Vec3, d: Vec3, ra: f32, rb: f32) -> Option<Range> {
     let a = d.x * d.x + d.y * d.y - wd * wd;
     let b = o.x * d.x + o.y * d.y - w0 * wd;
     let c = o.x * o.x + o.y * o.y - w0 * w0;
-    let full = (f32::NEG_INFINITY, sub::SIDE, f32::INFINITY, sub::SIDE);
-    let mut pieces: [Option<Range>; 2] = [None, None];
-    if a.abs() <= 1e-12 * (d.x * d.x + d.y * d.y + wd * wd) {
+    let mut out: Option<Range64> = None;
+    // Within the slab only the nappe with a non-negative radius remains, so at
+    // most one piece survives (both only through rounding next to the apex: the
+    // frustum is convex, so take their hull).
+    for p in cone_pieces([a, b, c], d.x * d.x + d.y * d.y + wd * wd).into_iter().flatten() {
+        let Some(r) = and(p, slab) else { continue };
+        // The other nappe: reject pieces whose midpoint has negative radius.
+        let tm = match (r.0.is_finite(), r.2.is_finite()) {
+            (true, true) => 0.5 * (r.0 + r.2),
+            (true, false) => r.0,
+            (false, true) => r.2,
+            _ => 0.0,
+        };
+        if w0 + wd * tm < -1e-6 {
+            continue;
+        }
+        out = Some(match out {
+            None => r,
+            Some(q) => {
+                let (t0, s0) = if q.0 <= r.0 { (q.0, q.1) } else { (r.0, r.1) };
+                let (t1, s1) = if q.2 >= r.2 { (q.2, q.3) } else { (r.2, r.3) };
+                (t0, s0, t1, s1)
+            }
+        });
+    }
+    out
+}
+
+/// Where `A t^2 + 2 B t + C <= 0` (the double cone's inside), as up to two
+/// pieces of the side; `A` is taken as 0 within 1e-12 of `norm` (the sum of
+/// its terms' magnitudes).
+#[inline(always)]
+fn cone_pieces([a, b, c]: [f64; 3], norm: f64) -> [Option<Range64>; 2] {
+    let full = (f64::NEG_INFINITY, sub::SIDE, f64::INFINITY, sub::SIDE);
+    let mut pieces: [Option<Range64>; 2] = [None, None];
+    if a.abs() <= 1e-12 * norm {
         // Linear: 2 B t + C <= 0 (ray parallel to a generator).
         if b == 0.0 {
             if c <= 0.0 {
                 pieces[0] = Some(full);
             }
         } else {
-            let t = (-c / (2.0 * b)) as f32;
-            pieces[0] = Some(if b > 0.0 { (f32::NEG_INFINITY, sub::SIDE, t, sub::SIDE) } else { (t, sub::SIDE, f32::INFINITY, sub::SIDE) });
+            let t = -c / (2.0 * b);
+            pieces[0] = Some(if b > 0.0 { (f64::NEG_INFINITY, sub::SIDE, t, sub::SIDE) } else { (t, sub::SIDE, f64::INFINITY, sub::SIDE) });
         }
+        return pieces;
+    }
+    let disc = b * b - a * c;
+    if disc < 0.0 {
+        if a < 0.0 {
+            pieces[0] = Some(full);
+        }
+        return pieces;
+    }
+    let q = -(b + disc.sqrt().copysign(b));
+    let (mut t0, mut t1) = if q == 0.0 { (-b / a, -b / a) } else { (c / q, q / a) };
+    if t0 > t1 {
+        std::mem::swap(&mut t0, &mut t1);
+    }
+    if a > 0.0 {
+        pieces[0] = Some((t0, sub::SIDE, t1, sub::SIDE));
     } else {
-        let disc = b * b - a * c;
-        if disc < 0.0 {
-            if a < 0.0 {
-                pieces[0] = Some(full);
-            }
-        } else {
-            let q = -(b + disc.sqrt().copysign(b));
-            let (mut t0, mut t1) = if q == 0.0 { (-b / a, -b / a) } else { (c / q, q / a) };
-            if t0 > t1 {
-                std::mem::swap(&mut t0, &mut t1);
-            }
-            let (t0, t1) = (t0 as f32, t1 as f32);
-            if a > 0.0 {
-                pieces[0] = Some((t0, sub::SIDE, t1, sub::SIDE));
-            } else {
-                pieces[0] = Some((f32::NEG_INFINITY, sub::SIDE, t0, sub::SIDE));
-                pieces[1] = Some((t1, sub::SIDE, f32::INFINITY, sub::SIDE));
-            }
-        }
+        pieces[0] = Some((f64::NEG_INFINITY, sub::SIDE, t0, sub::SIDE));
+        pieces[1] = Some((t1, sub::SIDE, f64::INFINITY, sub::SIDE));
     }
-    // Within the slab only the nappe with a non-negative radius remains, so at
-    // most one piece survives (both only through rounding next to the apex: the
-    // frustum is convex, so take their hull).
-    let mut out: Option<Range> = None;
-    for p in pieces.into_iter().flatten() {
-        if let Some(r) = and(p, slab) {
-            // The other nappe: reject pieces whose midpoint has negative radius.
-            let tm = match (r.0.is_finite(), r.2.is_finite()) {
-                (true, true) => 0.5 * (r.0 + r.2),
-                (true, false) => r.0,
-                (false, true) => r.2,
-                _ => 0.0,
-            };
-            if w0 + wd * (tm as f64) < -1e-6 {
-                continue;
-            }
-            out = Some(match out {
-                None => r,
-                Some(q) => {
-                    let (t0, s0) = if q.0 <= r.0 { (q.0, q.1) } else { (r.0, r.1) };
-                    let (t1, s1) = if q.2 >= r.2 { (q.2, q.3) } else { (r.2, r.3) };
-                    (t0, s0, t1, s1)
-                }
-            });
-        }
-    }
-    out
+    pieces
 }
 
 /// Half-space `n . p <= offset` (n unit length).

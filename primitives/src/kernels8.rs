@@ -8,13 +8,15 @@
 //! before clipping, bit for bit: the same IEEE operations on the same values
 //! in the same order as the scalar map and kernels (no fused multiply-add,
 //! whose single rounding would differ), with selects where the scalar code
-//! branches. Lanes whose local direction the scalar path would rescale
+//! branches. Boxes and half-spaces are solved in f32 (8 lanes a register
+//! with AVX); lanes whose local direction the scalar path would rescale
 //! ([`Ray::dir_rescale`]) are left to it. A ball (a sphere under a
 //! similarity) is solved in f64 from its f32 centre and radius in world
-//! space, as the scalar path does. The cone (solved in f64) and the other
-//! kinds have no packet kernel.
+//! space, ellipsoids and cylinders in f64 through their f64 maps
+//! ([`crate::table64`]), as the scalar path does (every lane done: f64
+//! needs no rescaling). The cone and the other kinds have no packet kernel.
 
-use glam::{Vec3, Vec3A};
+use glam::{DMat3, Vec3, Vec3A};
 
 use crate::kernels::sub;
 use crate::ray::DIR_SAFE_MAX;
@@ -82,6 +84,74 @@ fn ball<D: D8>(o: &[D; 3], d: &[D; 3], r: f64) -> (D, D, D) {
     (hit, D::select(keep, t0, t1), D::select(keep, t1, t0))
 }
 
+/// Row `a` of `m v` in `map64`'s order: (x_axis v.x + y_axis v.y) + z_axis v.z.
+#[inline(always)]
+fn map_row<D: D8>(m: &DMat3, a: usize, v: &[D; 3]) -> D {
+    D::splat(m.x_axis[a]).mul(v[0]).add(D::splat(m.y_axis[a]).mul(v[1])).add(D::splat(m.z_axis[a]).mul(v[2]))
+}
+
+/// The all-true f64 mask.
+#[inline(always)]
+fn all_d<D: D8>() -> D {
+    D::splat(f64::from_bits(u64::MAX))
+}
+
+/// `kernels::slab01` and `kernels::and` (f64) folded into a range `r`.
+#[inline(always)]
+fn and_slab01<D: D8>(oz: D, dz: D, r: R8<D>) -> R8<D> {
+    let zero = D::splat(0.0);
+    let one = D::splat(1.0);
+    let sd = |id: u32| D::splat(id as f64);
+    let flat = dz.eq(zero);
+    let ta = oz.neg().div(dz);
+    let tb = one.sub(oz).div(dz);
+    let ord = ta.le(tb);
+    let (inf, ninf) = (D::splat(f64::INFINITY), D::splat(f64::NEG_INFINITY));
+    let b0 = D::select(flat, ninf, D::select(ord, ta, tb));
+    let bs0 = D::select(flat, sd(sub::CAP0), D::select(ord, sd(sub::CAP0), sd(sub::CAP1)));
+    let b1 = D::select(flat, inf, D::select(ord, tb, ta));
+    let bs1 = D::select(flat, sd(sub::CAP1), D::select(ord, sd(sub::CAP1), sd(sub::CAP0)));
+    let inside = zero.le(oz).and(oz.le(one));
+    let slab_hit = D::select(flat, inside, all_d());
+    // `and(side, slab)`: the later entry (ties to the side), the earlier exit.
+    let e = r.t0.ge(b0);
+    let x = r.t1.le(b1);
+    let t0 = D::select(e, r.t0, b0);
+    let t1 = D::select(x, r.t1, b1);
+    R8 { hit: r.hit.and(slab_hit).and(t0.le(t1)), t0, s0: D::select(e, r.s0, bs0), t1, s1: D::select(x, r.s1, bs1) }
+}
+
+/// `kernels::cylinder` (f64, in the cylinder's frame).
+#[inline(always)]
+fn cylinder<D: D8>(o: &[D; 3], d: &[D; 3]) -> R8<D> {
+    let zero = D::splat(0.0);
+    let one = D::splat(1.0);
+    let a = d[0].mul(d[0]).add(d[1].mul(d[1]));
+    let axial = a.eq(zero);
+    let rr = o[0].mul(o[0]).add(o[1].mul(o[1]));
+    let b = o[0].mul(d[0]).add(o[1].mul(d[1]));
+    let r = b.div(a);
+    let fx = o[0].sub(d[0].mul(r));
+    let fy = o[1].sub(d[1].mul(r));
+    let disc = a.mul(one.sub(fx.mul(fx).add(fy.mul(fy))));
+    let c = rr.sub(one);
+    let q = b.add(disc.sqrt().copysign(b)).neg();
+    let q0 = q.eq(zero);
+    let t0 = D::select(q0, zero, c.div(q));
+    let t1 = D::select(q0, zero, q.div(a));
+    let keep = t0.le(t1);
+    let axial_hit = rr.gt(one).andnot(all_d());
+    let side_id = D::splat(sub::SIDE as f64);
+    let side = R8 {
+        hit: D::select(axial, axial_hit, disc.ge(zero)),
+        t0: D::select(axial, D::splat(f64::NEG_INFINITY), D::select(keep, t0, t1)),
+        s0: side_id,
+        t1: D::select(axial, D::splat(f64::INFINITY), D::select(keep, t1, t0)),
+        s1: side_id,
+    };
+    and_slab01(o[2], d[2], side)
+}
+
 /// A kernel's answer in lanes: where the line meets the solid, and the range.
 #[derive(Clone, Copy)]
 struct R8<V> {
@@ -108,24 +178,6 @@ fn s<V: V8>(id: u32) -> V {
 fn dot<V: V8>(a: &[V; 3], b: &[V; 3]) -> V {
     // `Vec3::dot`'s order: (x x' + y y') + z z'.
     a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
-}
-
-/// `kernels::sphere`.
-#[inline(always)]
-fn sphere<V: V8>(o: &[V; 3], d: &[V; 3]) -> R8<V> {
-    let a = dot(d, d);
-    let b = dot(o, d);
-    let r = b.div(a);
-    let f = [o[0].sub(d[0].mul(r)), o[1].sub(d[1].mul(r)), o[2].sub(d[2].mul(r))];
-    let disc = a.mul(V::splat(1.0).sub(dot(&f, &f)));
-    let c = dot(o, o).sub(V::splat(1.0));
-    let hit = disc.ge(V::splat(0.0)).unless(c.eq(V::splat(f32::INFINITY)));
-    let q = b.add(disc.sqrt().copysign(b)).neg();
-    let q0 = q.eq(V::splat(0.0));
-    let t0 = V::select(q0, V::splat(0.0), c.div(q));
-    let t1 = V::select(q0, V::splat(0.0), q.div(a));
-    let keep = t0.le(t1);
-    R8 { hit, t0: V::select(keep, t0, t1), s0: s(sub::SIDE), t1: V::select(keep, t1, t0), s1: s(sub::SIDE) }
 }
 
 /// `kernels::cuboid` on `[mn, mx]`.
@@ -157,61 +209,6 @@ fn cuboid<V: V8>(o: &[V; 3], d: &[V; 3], mn: [f32; 3], mx: [f32; 3]) -> R8<V> {
         s_out = V::select(up_out, sf, s_out);
     }
     R8 { hit: t_in.le(t_out).unless(miss), t0: t_in, s0: s_in, t1: t_out, s1: s_out }
-}
-
-/// `kernels::slab01` and `kernels::and` folded into a range `r`.
-#[inline(always)]
-fn and_slab01<V: V8>(oz: V, dz: V, r: R8<V>) -> R8<V> {
-    let zero = V::splat(0.0);
-    let one = V::splat(1.0);
-    let flat = dz.eq(zero);
-    let ta = oz.neg().div(dz);
-    let tb = one.sub(oz).div(dz);
-    let ord = ta.le(tb);
-    let (inf, ninf) = (V::splat(f32::INFINITY), V::splat(f32::NEG_INFINITY));
-    let b0 = V::select(flat, ninf, V::select(ord, ta, tb));
-    let bs0 = V::select(flat, s(sub::CAP0), V::select(ord, s(sub::CAP0), s(sub::CAP1)));
-    let b1 = V::select(flat, inf, V::select(ord, tb, ta));
-    let bs1 = V::select(flat, s(sub::CAP1), V::select(ord, s(sub::CAP1), s(sub::CAP0)));
-    let inside = zero.le(oz).and(oz.le(one));
-    let slab_hit = V::select(flat, inside, all());
-    // `and(side, slab)`: the later entry (ties to the side), the earlier exit.
-    let e = r.t0.ge(b0);
-    let x = r.t1.le(b1);
-    let t0 = V::select(e, r.t0, b0);
-    let t1 = V::select(x, r.t1, b1);
-    R8 { hit: r.hit.and(slab_hit).and(t0.le(t1)), t0, s0: V::select(e, r.s0, bs0), t1, s1: V::select(x, r.s1, bs1) }
-}
-
-/// `kernels::cylinder`.
-#[inline(always)]
-fn cylinder<V: V8>(o: &[V; 3], d: &[V; 3]) -> R8<V> {
-    let zero = V::splat(0.0);
-    let one = V::splat(1.0);
-    let a = d[0].mul(d[0]).add(d[1].mul(d[1]));
-    let axial = a.eq(zero);
-    let rr = o[0].mul(o[0]).add(o[1].mul(o[1]));
-    let b = o[0].mul(d[0]).add(o[1].mul(d[1]));
-    let r = b.div(a);
-    let fx = o[0].sub(d[0].mul(r));
-    let fy = o[1].sub(d[1].mul(r));
-    let disc = a.mul(one.sub(fx.mul(fx).add(fy.mul(fy))));
-    let c = rr.sub(one);
-    let q = b.add(disc.sqrt().copysign(b)).neg();
-    let q0 = q.eq(zero);
-    let t0 = V::select(q0, zero, c.div(q));
-    let t1 = V::select(q0, zero, q.div(a));
-    let keep = t0.le(t1);
-    let side_hit = disc.ge(zero).unless(c.eq(V::splat(f32::INFINITY)));
-    let axial_hit = rr.gt(one).andnot(all());
-    let side = R8 {
-        hit: V::select(axial, axial_hit, side_hit),
-        t0: V::select(axial, V::splat(f32::NEG_INFINITY), V::select(keep, t0, t1)),
-        s0: s(sub::SIDE),
-        t1: V::select(axial, V::splat(f32::INFINITY), V::select(keep, t1, t0)),
-        s1: s(sub::SIDE),
-    };
-    and_slab01(o[2], d[2], side)
 }
 
 /// `kernels::half_space` for `n . p <= w`.
@@ -282,8 +279,10 @@ impl LeafTable {
     #[inline(always)]
     fn ranges8_in<V: V8, D: D8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let iu = i as usize;
-        if self.kind[iu] == LeafKind::Sphere {
-            return self.balls8::<D>(iu, rays, lanes, out);
+        match self.kind[iu] {
+            LeafKind::Sphere => return self.balls8::<D>(iu, rays, lanes, out),
+            LeafKind::Ellipsoid | LeafKind::Cylinder => return self.quadrics8::<D>(iu, rays, lanes, out),
+            _ => {}
         }
         let m = &self.to_local[iu];
         let anchor = self.anchor[iu];
@@ -305,15 +304,44 @@ impl LeafTable {
         let in_range = V::splat(1.0 / DIR_SAFE_MAX).le(big).and(big.le(V::splat(DIR_SAFE_MAX)));
         let (p0, p1) = (self.p0[iu], self.p1[iu]);
         let r = match self.kind[iu] {
-            LeafKind::Ellipsoid => sphere(&lo, &ld),
             LeafKind::Cuboid => cuboid(&lo, &ld, [p0.x, p0.y, p0.z], [p1.x, p1.y, p1.z]),
-            LeafKind::Cylinder => cylinder(&lo, &ld),
             LeafKind::HalfSpace => half_space(&lo, &ld, [p0.x, p0.y, p0.z], p0.w),
             _ => unreachable!("no packet kernel for {:?}", self.kind[iu]),
         };
         let done = in_range.bitmask() & lanes;
         *out =
             Ranges8 { done, hit: r.hit.bitmask() & done, t0: r.t0.store(), s0: r.s0.store_u32(), t1: r.t1.store(), s1: r.s1.store_u32() };
+    }
+
+    /// [`LeafTable::ranges8`] of an ellipsoid or a cylinder, as the scalar
+    /// path's `quadric_spans`: the lanes mapped to the leaf's frame in f64
+    /// (`local64`, `map64`: `(p - anchor)`, then ((x_axis x + y_axis y) +
+    /// z_axis z), then the anchor's local point), solved in f64. (No
+    /// closures here: one compiled apart from this AVX function made every
+    /// AVX operation a call, 10x the instructions.)
+    #[inline(always)]
+    fn quadrics8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        let (m, b) = &self.maps64[self.ext[iu] as usize];
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
+        let o = [D::widen(&rays.o[0]).sub(D::splat(c.x)), D::widen(&rays.o[1]).sub(D::splat(c.y)), D::widen(&rays.o[2]).sub(D::splat(c.z))];
+        let d = [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])];
+        let lo = [map_row(m, 0, &o).add(D::splat(b.x)), map_row(m, 1, &o).add(D::splat(b.y)), map_row(m, 2, &o).add(D::splat(b.z))];
+        let ld = [map_row(m, 0, &d), map_row(m, 1, &d), map_row(m, 2, &d)];
+        let r = if self.kind[iu] == LeafKind::Cylinder {
+            cylinder(&lo, &ld)
+        } else {
+            let (hit, t0, t1) = ball(&lo, &ld, 1.0);
+            let side = D::splat(sub::SIDE as f64);
+            R8 { hit, t0, s0: side, t1, s1: side }
+        };
+        *out = Ranges8 {
+            done: lanes,
+            hit: r.hit.bitmask() & lanes,
+            t0: r.t0.narrow(),
+            s0: r.s0.store_u32(),
+            t1: r.t1.narrow(),
+            s1: r.s1.store_u32(),
+        };
     }
 
     /// [`LeafTable::ranges8`] of a ball (`LeafKind::Sphere`), as the scalar
@@ -323,22 +351,17 @@ impl LeafTable {
     fn balls8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let anchor = self.anchor[iu];
         let (p0, p1) = (self.p0[iu], self.p1[iu]);
-        let wide = |a: &[f32; 8]| D::load(&a.map(|x| x as f64));
         // `ball_frame`: (p - anchor) - p1, in f64; the radius p0.x + p0.y.
-        let c = [anchor.x, anchor.y, anchor.z];
-        let e = [p1.x, p1.y, p1.z];
-        let o: [D; 3] = std::array::from_fn(|a| wide(&rays.o[a]).sub(D::splat(c[a] as f64)).sub(D::splat(e[a] as f64)));
-        let d: [D; 3] = std::array::from_fn(|a| wide(&rays.d[a]));
+        let (c, e) = (Vec3::from(anchor).as_dvec3(), p1.truncate().as_dvec3());
+        let o = [
+            D::widen(&rays.o[0]).sub(D::splat(c.x)).sub(D::splat(e.x)),
+            D::widen(&rays.o[1]).sub(D::splat(c.y)).sub(D::splat(e.y)),
+            D::widen(&rays.o[2]).sub(D::splat(c.z)).sub(D::splat(e.z)),
+        ];
+        let d = [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])];
         let (hit, t0, t1) = ball(&o, &d, p0.x as f64 + p0.y as f64);
         let side = [sub::SIDE; 8];
-        *out = Ranges8 {
-            done: lanes,
-            hit: hit.bitmask() & lanes,
-            t0: t0.store().map(|t| t as f32),
-            s0: side,
-            t1: t1.store().map(|t| t as f32),
-            s1: side,
-        };
+        *out = Ranges8 { done: lanes, hit: hit.bitmask() & lanes, t0: t0.narrow(), s0: side, t1: t1.narrow(), s1: side };
     }
 }
 

@@ -91,7 +91,8 @@ fn packet_kernels_match_the_scalar_kernels_bit_for_bit() {
             if r.done & (1 << k) == 0 {
                 // Only a lane the scalar path rescales may be left to it.
                 let ld = t.to_local[i as usize].transform_vector3(d[k]);
-                assert!(t.kind[i as usize] != LeafKind::Sphere && Ray::dir_rescale(ld).is_some(), "leaf {i} lane {k} left undone");
+                let f64_kind = matches!(t.kind[i as usize], LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder);
+                assert!(!f64_kind && Ray::dir_rescale(ld).is_some(), "leaf {i} lane {k} left undone");
                 continue;
             }
             lanes_done += 1;
@@ -156,9 +157,9 @@ fn packet_kernels_match_the_scalar_kernels_on_edge_cases() {
         for k in 0..8 {
             let ray = Ray::new(o[k], d[k]);
             let ld = t.to_local[i as usize].transform_vector3(d[k]);
-            // A ball is traced in f64 without a map: every lane is done.
-            let ball = t.kind[i as usize] == LeafKind::Sphere;
-            assert_eq!(r.done & (1 << k) != 0, ball || Ray::dir_rescale(ld).is_none(), "leaf {i} lane {k} round {round}: done");
+            // Balls, ellipsoids and cylinders are traced in f64: every lane is done.
+            let f64_kind = matches!(t.kind[i as usize], LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder);
+            assert_eq!(r.done & (1 << k) != 0, f64_kind || Ray::dir_rescale(ld).is_none(), "leaf {i} lane {k} round {round}: done");
             if r.done & (1 << k) == 0 {
                 continue;
             }

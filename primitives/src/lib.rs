@@ -12,10 +12,11 @@
 //! * its bounds ([`LeafTable::bounds`]).
 //!
 //! The table is struct-of-arrays; the hot path does one `match` on the fieldless
-//! [`LeafKind`]. Kernels live in [`kernels`] (f32, except the torus quartic, which
-//! is solved in f64 by [`quartic`], and the ball, a sphere under similarities,
-//! traced in world space in f64 so that tangent chords are those of its f32
-//! inputs; [`poly`] holds the general root finders). [`bvh::FlatBvh`] is the BVH every level of the
+//! [`LeafKind`]. Kernels live in [`kernels`] (f32 for boxes and half-spaces;
+//! f64 for the ball, a sphere under similarities, traced in world space, and
+//! for ellipsoids, cylinders, cones and the torus quartic ([`quartic`]),
+//! traced through an f64 map ([`table64`]), so that tangent chords are those
+//! of their f32 inputs; [`poly`] holds the general root finders). [`bvh::FlatBvh`] is the BVH every level of the
 //! engine uses (built with obvhs).
 #![warn(missing_docs)]
 
@@ -34,6 +35,7 @@ pub mod ray;
 mod simd8;
 pub mod sweep;
 pub mod table;
+pub mod table64;
 pub mod trim;
 pub mod wide_node;
 

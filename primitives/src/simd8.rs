@@ -19,11 +19,7 @@ pub(crate) trait V8: Copy {
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
     fn div(self, o: Self) -> Self;
-    fn sqrt(self) -> Self;
     fn abs(self) -> Self;
-    fn neg(self) -> Self;
-    /// `self` with the sign bit of `s` (`f32::copysign`).
-    fn copysign(self, s: Self) -> Self;
     fn max(self, o: Self) -> Self;
     fn le(self, o: Self) -> Self;
     fn lt(self, o: Self) -> Self;
@@ -103,25 +99,9 @@ pub(crate) mod sse {
             each!(_mm_div_ps, self, o)
         }
         #[inline(always)]
-        fn sqrt(self) -> Self {
-            unsafe { Sse([_mm_sqrt_ps(self.0[0]), _mm_sqrt_ps(self.0[1])]) }
-        }
-        #[inline(always)]
         fn abs(self) -> Self {
             let m = Self::splat(-0.0);
             each!(_mm_andnot_ps, m, self)
-        }
-        #[inline(always)]
-        fn neg(self) -> Self {
-            let m = Self::splat(-0.0);
-            each!(_mm_xor_ps, m, self)
-        }
-        #[inline(always)]
-        fn copysign(self, s: Self) -> Self {
-            let m = Self::splat(-0.0);
-            let sign = each!(_mm_and_ps, s, m);
-            let mag = each!(_mm_andnot_ps, m, self);
-            each!(_mm_or_ps, sign, mag)
         }
         #[inline(always)]
         fn max(self, o: Self) -> Self {
@@ -221,23 +201,8 @@ pub(crate) mod avx {
             unsafe { Avx(_mm256_div_ps(self.0, o.0)) }
         }
         #[inline(always)]
-        fn sqrt(self) -> Self {
-            unsafe { Avx(_mm256_sqrt_ps(self.0)) }
-        }
-        #[inline(always)]
         fn abs(self) -> Self {
             unsafe { Avx(_mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0)) }
-        }
-        #[inline(always)]
-        fn neg(self) -> Self {
-            unsafe { Avx(_mm256_xor_ps(_mm256_set1_ps(-0.0), self.0)) }
-        }
-        #[inline(always)]
-        fn copysign(self, s: Self) -> Self {
-            unsafe {
-                let m = _mm256_set1_ps(-0.0);
-                Avx(_mm256_or_ps(_mm256_and_ps(s.0, m), _mm256_andnot_ps(m, self.0)))
-            }
         }
         #[inline(always)]
         fn max(self, o: Self) -> Self {
@@ -286,12 +251,16 @@ pub(crate) mod avx {
     }
 }
 
-/// The 8-lane f64 operations of the ball kernel (as [`V8`]; masks are all
-/// ones or all zeros per lane).
+/// The 8-lane f64 operations of the f64 kernels (ball, ellipsoid,
+/// cylinder; as [`V8`]; masks are all ones or all zeros per lane).
 pub(crate) trait D8: Copy {
     fn splat(x: f64) -> Self;
-    fn load(a: &[f64; 8]) -> Self;
-    fn store(self) -> [f64; 8];
+    /// Eight f32 lanes, widened (exactly).
+    fn widen(a: &[f32; 8]) -> Self;
+    /// The lanes rounded to f32 (to nearest, as `as f32`).
+    fn narrow(self) -> [f32; 8];
+    /// Lanes holding small whole numbers, as integers.
+    fn store_u32(self) -> [u32; 8];
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
@@ -301,7 +270,11 @@ pub(crate) trait D8: Copy {
     fn copysign(self, s: Self) -> Self;
     fn le(self, o: Self) -> Self;
     fn ge(self, o: Self) -> Self;
+    fn gt(self, o: Self) -> Self;
     fn eq(self, o: Self) -> Self;
+    fn and(self, o: Self) -> Self;
+    /// `!self & o`, bitwise.
+    fn andnot(self, o: Self) -> Self;
     fn select(m: Self, a: Self, b: Self) -> Self;
     fn bitmask(self) -> u32;
 }
@@ -327,14 +300,31 @@ pub(crate) mod sse_d {
             unsafe { SseD([_mm_set1_pd(x); 4]) }
         }
         #[inline(always)]
-        fn load(a: &[f64; 8]) -> Self {
-            unsafe { SseD(std::array::from_fn(|h| _mm_loadu_pd(a.as_ptr().add(2 * h)))) }
+        fn widen(a: &[f32; 8]) -> Self {
+            unsafe {
+                let (lo, hi) = (_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(a.as_ptr().add(4)));
+                SseD([_mm_cvtps_pd(lo), _mm_cvtps_pd(_mm_movehl_ps(lo, lo)), _mm_cvtps_pd(hi), _mm_cvtps_pd(_mm_movehl_ps(hi, hi))])
+            }
         }
         #[inline(always)]
-        fn store(self) -> [f64; 8] {
-            let mut a = [0.0f64; 8];
-            for h in 0..4 {
-                unsafe { _mm_storeu_pd(a.as_mut_ptr().add(2 * h), self.0[h]) };
+        fn narrow(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            unsafe {
+                let lo = _mm_movelh_ps(_mm_cvtpd_ps(self.0[0]), _mm_cvtpd_ps(self.0[1]));
+                let hi = _mm_movelh_ps(_mm_cvtpd_ps(self.0[2]), _mm_cvtpd_ps(self.0[3]));
+                _mm_storeu_ps(a.as_mut_ptr(), lo);
+                _mm_storeu_ps(a.as_mut_ptr().add(4), hi);
+            }
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe {
+                let lo = _mm_unpacklo_epi64(_mm_cvttpd_epi32(self.0[0]), _mm_cvttpd_epi32(self.0[1]));
+                let hi = _mm_unpacklo_epi64(_mm_cvttpd_epi32(self.0[2]), _mm_cvttpd_epi32(self.0[3]));
+                _mm_storeu_si128(a.as_mut_ptr() as *mut __m128i, lo);
+                _mm_storeu_si128(a.as_mut_ptr().add(4) as *mut __m128i, hi);
             }
             a
         }
@@ -379,8 +369,20 @@ pub(crate) mod sse_d {
             each!(_mm_cmpge_pd, self, o)
         }
         #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            each!(_mm_cmpgt_pd, self, o)
+        }
+        #[inline(always)]
         fn eq(self, o: Self) -> Self {
             each!(_mm_cmpeq_pd, self, o)
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            each!(_mm_and_pd, self, o)
+        }
+        #[inline(always)]
+        fn andnot(self, o: Self) -> Self {
+            each!(_mm_andnot_pd, self, o)
         }
         #[inline(always)]
         fn select(m: Self, a: Self, b: Self) -> Self {
@@ -421,15 +423,24 @@ pub(crate) mod avx_d {
             unsafe { AvxD([_mm256_set1_pd(x); 2]) }
         }
         #[inline(always)]
-        fn load(a: &[f64; 8]) -> Self {
-            unsafe { AvxD([_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(a.as_ptr().add(4))]) }
+        fn widen(a: &[f32; 8]) -> Self {
+            unsafe { AvxD([_mm256_cvtps_pd(_mm_loadu_ps(a.as_ptr())), _mm256_cvtps_pd(_mm_loadu_ps(a.as_ptr().add(4)))]) }
         }
         #[inline(always)]
-        fn store(self) -> [f64; 8] {
-            let mut a = [0.0f64; 8];
+        fn narrow(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
             unsafe {
-                _mm256_storeu_pd(a.as_mut_ptr(), self.0[0]);
-                _mm256_storeu_pd(a.as_mut_ptr().add(4), self.0[1]);
+                _mm_storeu_ps(a.as_mut_ptr(), _mm256_cvtpd_ps(self.0[0]));
+                _mm_storeu_ps(a.as_mut_ptr().add(4), _mm256_cvtpd_ps(self.0[1]));
+            }
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe {
+                _mm_storeu_si128(a.as_mut_ptr() as *mut __m128i, _mm256_cvttpd_epi32(self.0[0]));
+                _mm_storeu_si128(a.as_mut_ptr().add(4) as *mut __m128i, _mm256_cvttpd_epi32(self.0[1]));
             }
             a
         }
@@ -474,8 +485,20 @@ pub(crate) mod avx_d {
             unsafe { AvxD([_mm256_cmp_pd::<_CMP_GE_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_GE_OQ>(self.0[1], o.0[1])]) }
         }
         #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            unsafe { AvxD([_mm256_cmp_pd::<_CMP_GT_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_GT_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
         fn eq(self, o: Self) -> Self {
             unsafe { AvxD([_mm256_cmp_pd::<_CMP_EQ_OQ>(self.0[0], o.0[0]), _mm256_cmp_pd::<_CMP_EQ_OQ>(self.0[1], o.0[1])]) }
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            each!(_mm256_and_pd, self, o)
+        }
+        #[inline(always)]
+        fn andnot(self, o: Self) -> Self {
+            each!(_mm256_andnot_pd, self, o)
         }
         #[inline(always)]
         fn select(m: Self, a: Self, b: Self) -> Self {

@@ -100,15 +100,17 @@ pub enum LeafKind {
     /// its f64 residual).
     Sphere,
     /// Unit sphere under a map that is not a similarity (an ellipsoid in the
-    /// world), traced in local space ([`kernels::sphere`]).
+    /// world), traced in local space through its f64 map ([`crate::table64`]).
     Ellipsoid,
     /// Box `[p0, p1]`.
     Cuboid,
-    /// Unit capped cylinder.
+    /// Unit capped cylinder (f64 map, as the ellipsoid).
     Cylinder,
-    /// Frustum, radii in `p0.x`, `p0.y`.
+    /// Frustum, radii (relative to the larger, at z = 0 and z = 1) in
+    /// `p0.x + p0.z`, `p0.y + p0.w` (f32 numbers and their f64 residuals;
+    /// f64 map, as the ellipsoid).
     Cone,
-    /// Torus, minor radius (major = 1) in `p0.x`.
+    /// Torus, minor radius (major = 1) in `p0.x` (f64 map, as the ellipsoid).
     Torus,
     /// Half-space, normal in `p0.xyz`, offset in `p0.w`.
     HalfSpace,
@@ -283,10 +285,17 @@ impl LeafShape {
             }
             LeafShape::Cone(c) => {
                 let rmax = c.radius_a.max(c.radius_b);
+                // The radii relative to the larger, in f64 as f32 numbers and
+                // residuals (see `LeafKind::Cone`): rounded to f32, the
+                // smaller one moved a frustum's side by 6e-8 of it, which
+                // the tangent chords of a frustum of size 1e3 showed (1.5e-4
+                // of the view, wrong counts).
+                let (ra, rb) = (c.radius_a as f64 / rmax as f64, c.radius_b as f64 / rmax as f64);
+                let residual = |x: f64| (x - x as f32 as f64) as f32;
                 Canonical {
                     kind: LeafKind::Cone,
                     node_from_local: axis_frame(c.a, c.b, rmax as f64),
-                    p0: Vec4::new(c.radius_a / rmax, c.radius_b / rmax, 0.0, 0.0),
+                    p0: Vec4::new(ra as f32, rb as f32, residual(ra), residual(rb)),
                     p1: z,
                 }
             }
@@ -516,9 +525,10 @@ pub struct LeafTable {
     pub gcyls: Vec<Arc<GenCylData>>,
     /// Distinct meshes (a mesh under many transforms is stored once).
     pub meshes: Vec<Arc<MeshData>>,
-    /// Per torus (indexed by `ext`), its world-to-local map in f64: the
-    /// linear part and the anchor's local point (see [`LeafTable::spans_in`]).
-    pub torus_maps: Vec<(DMat3, DVec3)>,
+    /// Per leaf traced in f64 (tori, ellipsoids, cylinders, cones: see
+    /// [`LeafTable::has_map64`]; indexed by `ext`), its world-to-local map in
+    /// f64: the linear part and the anchor's local point ([`crate::table64`]).
+    pub maps64: Vec<(DMat3, DVec3)>,
     /// Polish tolerance of the torus roots, relative to the minor radius (see
     /// [`kernels::torus_tol`]; a bake sets [`kernels::TORUS_TOLERANCE`] unless
     /// the `torus` knob says otherwise; 0 is full f64 precision).
@@ -546,7 +556,7 @@ impl LeafTable {
         self.sweeps.clear();
         self.gcyls.clear();
         self.meshes.clear();
-        self.torus_maps.clear();
+        self.maps64.clear();
     }
 
     /// The f32 world-to-local map of `world_from_local` relative to `anchor`
@@ -558,7 +568,12 @@ impl LeafTable {
             return Err(LeafError::SingularTransform);
         }
         let inv = m.inverse();
-        let b = inv.transform_point3(anchor.as_dvec3());
+        // The anchor relative to the map's origin first (both near the leaf):
+        // through the inverse's translation, the anchor's local point lost
+        // 1e-16 of the offset from the origin to cancellation, and a ray at
+        // 3e-8 rad to a cylinder's cap 1e3 out crossed it 2.3e-6 of the
+        // view off (tests/stress_tangent.rs).
+        let b = inv.matrix3 * (anchor.as_dvec3() - m.translation);
         let inv32 = Affine3A::from_mat3_translation(inv.matrix3.as_mat3(), b.as_vec3());
         if !(inv32.matrix3.is_finite() && inv32.translation.is_finite()) {
             return Err(LeafError::SingularTransform);
@@ -675,12 +690,12 @@ impl LeafTable {
         self.p1.push(p1);
         self.bounds.push(bounds);
         let mut ext = 0;
-        if kind == LeafKind::Torus {
-            // The f64 map of the tube: the f32 one (6e-8 of the major
-            // radius) moved a thin tube's surface by a large part of it.
-            let inv = m.inverse();
-            self.torus_maps.push((inv.matrix3, inv.transform_point3(anchor.as_dvec3())));
-            ext = self.torus_maps.len() - 1;
+        if Self::has_map64(kind) {
+            // The f64 map (crate::table64): the f32 one (6e-8 relative) moved
+            // a thin tube's surface by a large part of it, and tangent chords'
+            // ends by ~6e-8 r^2 / (L/2).
+            self.maps64.push((m.matrix3.inverse(), b));
+            ext = self.maps64.len() - 1;
         }
         self.ext.push(ext as u32);
         Ok(i)
@@ -702,12 +717,14 @@ impl LeafTable {
     pub fn spans_in<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
         let (o, d) = (ray.origin, ray.dir);
         let iu = i as usize;
-        if self.kind[iu] == LeafKind::Sphere {
-            return self.ball_spans(i, ray, (tmin, tmax), out);
-        }
-        if self.kind[iu] == LeafKind::Torus {
-            self.torus_spans(i, ray, (tmin, tmax), false, out);
-            return;
+        match self.kind[iu] {
+            LeafKind::Sphere => return self.ball_spans(i, ray, (tmin, tmax), out),
+            LeafKind::Torus => {
+                self.torus_spans(i, ray, (tmin, tmax), false, out);
+                return;
+            }
+            LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone => return self.quadric_spans(i, ray, (tmin, tmax), out),
+            _ => {}
         }
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
@@ -729,13 +746,6 @@ impl LeafTable {
         (q, self.p0[iu].x as f64 + self.p0[iu].y as f64)
     }
 
-    /// The local point of world point `p` in torus `iu`'s frame, in f64.
-    #[inline(always)]
-    fn torus_local(&self, iu: usize, p: Vec3) -> DVec3 {
-        let (m, b) = &self.torus_maps[self.ext[iu] as usize];
-        *m * (p.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) + *b
-    }
-
     /// The spans of torus `i` along the world ray, its line mapped to the
     /// torus's frame in f64 (a direction of any f32 length needs no
     /// rescaling there).
@@ -744,8 +754,7 @@ impl LeafTable {
     #[inline(always)]
     fn torus_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, range: (f32, f32), first_only: bool, out: &mut S) -> f32 {
         let iu = i as usize;
-        let lo = self.torus_local(iu, ray.origin);
-        let ld = self.torus_maps[self.ext[iu] as usize].0 * ray.dir.as_dvec3();
+        let (lo, ld) = self.line64(iu, ray);
         let mut buf = [(0.0f32, 0.0f32); 3];
         let ask = kernels::TorusAsk { range, first_only };
         let (n, valid) = kernels::torus_query(lo, ld, (self.p0[iu].x, self.torus_tol), ask, &mut buf);
@@ -782,13 +791,11 @@ impl LeafTable {
     fn spans_local<S: SpanSink + ?Sized>(&self, i: u32, (lo, ld): (Vec3, Vec3), (tmin, tmax): (f32, f32), out: &mut S) {
         let iu = i as usize;
         let r = match self.kind[iu] {
-            // (A ball is traced by `ball_spans`; its map is a sphere's too.)
-            LeafKind::Sphere | LeafKind::Ellipsoid => kernels::sphere(lo, ld),
             LeafKind::Cuboid => kernels::cuboid(lo, ld, self.p0[iu].truncate(), self.p1[iu].truncate()),
-            LeafKind::Cylinder => kernels::cylinder(lo, ld),
-            LeafKind::Cone => kernels::cone(lo, ld, self.p0[iu].x, self.p0[iu].y),
             LeafKind::HalfSpace => kernels::half_space(lo, ld, self.p0[iu].truncate(), self.p0[iu].w),
-            LeafKind::Torus => unreachable!("a torus is traced in f64 by torus_spans"),
+            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus => {
+                unreachable!("traced in f64 (ball_spans, quadric_spans, torus_spans)")
+            }
             LeafKind::SweptSphere => {
                 self.sweeps[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
                 return;
@@ -947,19 +954,18 @@ impl LeafTable {
             return q.length_squared() <= r * r;
         }
         if self.kind[iu] == LeafKind::Torus {
-            return kernels::torus_contains(self.torus_local(iu, p), self.p0[iu].x as f64);
+            return kernels::torus_contains(self.local64(iu, p), self.p0[iu].x as f64);
+        }
+        if matches!(self.kind[iu], LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone) {
+            return self.quadric_contains(iu, p);
         }
         let l = self.local_point(iu, p);
         let p0 = self.p0[iu];
         match self.kind[iu] {
-            LeafKind::Sphere | LeafKind::Ellipsoid => l.length_squared() <= 1.0,
             LeafKind::Cuboid => l.cmpge(p0.truncate()).all() && l.cmple(self.p1[iu].truncate()).all(),
-            LeafKind::Cylinder => l.x * l.x + l.y * l.y <= 1.0 && (0.0..=1.0).contains(&l.z),
-            LeafKind::Cone => {
-                let r = p0.x + (p0.y - p0.x) * l.z;
-                l.x * l.x + l.y * l.y <= r * r && (0.0..=1.0).contains(&l.z)
+            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus => {
+                unreachable!("classified in f64 (ball_frame, local64)")
             }
-            LeafKind::Torus => unreachable!("a torus is classified in f64 (torus_local)"),
             LeafKind::HalfSpace => p0.truncate().dot(l) <= p0.w,
             LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].contains(l),
             LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].contains(l),
@@ -985,11 +991,13 @@ impl LeafTable {
             // a small difference of local points. Its offset from the tube's
             // core circle, once made, is a plain local normal for the f32 map
             // (the f64 map and normalisation cost tori 3% of its time).
-            let (m, b) = &self.torus_maps[self.ext[iu] as usize];
-            let rel = o.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3() + d.as_dvec3() * t as f64;
-            let l = *m * rel + *b;
+            let (lo, ld) = self.line64(iu, ray);
+            let l = lo + ld * t as f64;
             let xy = DVec3::new(l.x, l.y, 0.0).try_normalize().unwrap_or(DVec3::X);
             return world_normal(&self.to_local[iu], (l - xy).as_vec3());
+        }
+        if matches!(self.kind[iu], LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone) {
+            return self.quadric_normal(iu, sub, ray, t);
         }
         let m = &self.to_local[iu];
         let p0 = self.p0[iu];
@@ -1000,24 +1008,14 @@ impl LeafTable {
         }
         let l = self.local_point(iu, o) + m.transform_vector3(d) * t;
         let nl = match self.kind[iu] {
-            LeafKind::Sphere | LeafKind::Ellipsoid => l,
             LeafKind::Cuboid => {
                 let mut n = Vec3::ZERO;
                 n[(sub / 2) as usize] = if sub % 2 == 1 { 1.0 } else { -1.0 };
                 n
             }
-            LeafKind::Cylinder | LeafKind::Cone => match sub {
-                kernels::sub::CAP0 => Vec3::NEG_Z,
-                kernels::sub::CAP1 => Vec3::Z,
-                _ => {
-                    let (ra, rb) = if self.kind[iu] == LeafKind::Cone { (p0.x, p0.y) } else { (1.0, 1.0) };
-                    let r = ra + (rb - ra) * l.z;
-                    let xy = Vec3::new(l.x, l.y, 0.0).normalize_or(Vec3::X);
-                    // gradient of |xy| - r(z)
-                    xy - Vec3::Z * (rb - ra) * if r >= 0.0 { 1.0 } else { -1.0 }
-                }
-            },
-            LeafKind::Torus => unreachable!("a torus's normal is made in f64 (torus_local)"),
+            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus => {
+                unreachable!("made in f64 (ball_frame, quadric_normal, line64)")
+            }
             LeafKind::HalfSpace => p0.truncate(),
             LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].normal(sub, l),
             LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].normal(sub, l),
@@ -1033,7 +1031,7 @@ impl LeafTable {
 /// 1.0097 long) and from 1e23 on it is 0 (every normal became +y); such
 /// lengths (and huge ones, from tiny leaves) are normalised in f64.
 #[inline]
-fn world_normal(m: &Affine3A, nl: Vec3) -> Vec3 {
+pub(crate) fn world_normal(m: &Affine3A, nl: Vec3) -> Vec3 {
     let n = m.matrix3.transpose() * Vec3A::from(nl);
     let l2 = n.length_squared();
     if (1e-30..=1e30).contains(&l2) {

@@ -1,0 +1,119 @@
+//! The leaves traced through an f64 world-to-local map: ellipsoids (a sphere
+//! under a map that is not a similarity), cylinders, cones and tori.
+//!
+//! Why f64: through the f32 map (each entry rounded, 6e-8 relative) the local
+//! line is off by ~6e-8 of its distance from the leaf, which moves the ends
+//! of a tangent chord of length `L` by ~6e-8 r^2 / (L/2) (7e-5 of a 4-radii
+//! view for a chord of 1e-4 of it), decides by rounding whether a chord of
+//! up to ~3e-4 of the view exists, and moves where a ray along a cap's plane
+//! crosses it anywhere along the cap (tests/stress_tangent.rs: 0.16-0.26 of
+//! the view). In f64 the answer is that of the f32 inputs, rounded once to
+//! f32 t, and the f64 ranges need no rescaling of the direction.
+//!
+//! Spans, point classification and normals all read the same f64 local
+//! point, so that they agree.
+
+use glam::{DMat3, DVec3, Vec3};
+
+use crate::{
+    kernels::{self, sub},
+    table::{push_clipped, world_normal, LeafKind, LeafTable},
+    Ray, Span, SpanSink, Surf,
+};
+
+/// `m v`, summed in a fixed order, ((x_axis v.x + y_axis v.y) + z_axis v.z),
+/// which the packet kernels repeat lane by lane (`kernels8`): their answers
+/// must be the single-ray path's bit for bit.
+#[inline(always)]
+pub(crate) fn map64(m: &DMat3, v: DVec3) -> DVec3 {
+    let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
+    DVec3::new((x.x * v.x + y.x * v.y) + z.x * v.z, (x.y * v.x + y.y * v.y) + z.y * v.z, (x.z * v.x + y.z * v.y) + z.z * v.z)
+}
+
+impl LeafTable {
+    /// Does leaf kind `k` keep an f64 map in [`LeafTable::maps64`]?
+    #[inline(always)]
+    pub fn has_map64(k: LeafKind) -> bool {
+        matches!(k, LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus)
+    }
+
+    /// Cone `iu`'s radii at z = 0 and z = 1 (relative to the larger), in f64.
+    #[inline(always)]
+    fn cone_radii(&self, iu: usize) -> (f64, f64) {
+        let p0 = self.p0[iu];
+        (p0.x as f64 + p0.z as f64, p0.y as f64 + p0.w as f64)
+    }
+
+    /// The local point of world point `p` in leaf `iu`'s f64 frame: relative
+    /// to the anchor first (exact in f64), then the linear map, then the
+    /// anchor's local point.
+    #[inline(always)]
+    pub(crate) fn local64(&self, iu: usize, p: Vec3) -> DVec3 {
+        let (m, b) = &self.maps64[self.ext[iu] as usize];
+        map64(m, p.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) + *b
+    }
+
+    /// The world ray as a local line `(origin, direction)` in leaf `iu`'s f64 frame.
+    #[inline(always)]
+    pub(crate) fn line64(&self, iu: usize, ray: &Ray) -> (DVec3, DVec3) {
+        (self.local64(iu, ray.origin), map64(&self.maps64[self.ext[iu] as usize].0, ray.dir.as_dvec3()))
+    }
+
+    /// The spans of an ellipsoid, cylinder or cone along the world ray.
+    #[inline(always)]
+    pub(crate) fn quadric_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
+        let iu = i as usize;
+        let (lo, ld) = self.line64(iu, ray);
+        let r = match self.kind[iu] {
+            LeafKind::Ellipsoid => kernels::ball(lo, ld, 1.0).map(|(t0, t1)| (t0, sub::SIDE, t1, sub::SIDE)),
+            LeafKind::Cylinder => kernels::cylinder(lo, ld),
+            _ => {
+                let (ra, rb) = self.cone_radii(iu);
+                kernels::cone(lo, ld, ra, rb)
+            }
+        };
+        if let Some(r) = r {
+            let (t0, s0, t1, s1) = kernels::narrow(r);
+            push_clipped(out, Span { t0, s0: Surf::new(i, s0), t1, s1: Surf::new(i, s1) }, tmin, tmax);
+        }
+    }
+
+    /// Is world point `p` inside ellipsoid, cylinder or cone `iu` (boundary included)?
+    #[inline]
+    pub(crate) fn quadric_contains(&self, iu: usize, p: Vec3) -> bool {
+        let l = self.local64(iu, p);
+        match self.kind[iu] {
+            LeafKind::Ellipsoid => l.length_squared() <= 1.0,
+            LeafKind::Cylinder => l.x * l.x + l.y * l.y <= 1.0 && (0.0..=1.0).contains(&l.z),
+            _ => {
+                let (ra, rb) = self.cone_radii(iu);
+                let r = ra + (rb - ra) * l.z;
+                l.x * l.x + l.y * l.y <= r * r && (0.0..=1.0).contains(&l.z)
+            }
+        }
+    }
+
+    /// The outward unit world normal of ellipsoid, cylinder or cone `iu` at
+    /// `t` on the world ray, on sub-surface `sub`. The local normal is made
+    /// at the f64 local point; once made it is a plain direction, which the
+    /// f32 map carries to 6e-8.
+    pub(crate) fn quadric_normal(&self, iu: usize, sub: u32, ray: &Ray, t: f32) -> Vec3 {
+        let (lo, ld) = self.line64(iu, ray);
+        let l = lo + ld * t as f64;
+        let nl = match (self.kind[iu], sub) {
+            (LeafKind::Ellipsoid, _) => l,
+            (_, sub::CAP0) => DVec3::NEG_Z,
+            (_, sub::CAP1) => DVec3::Z,
+            (kind, _) => {
+                let (ra, rb) = if kind == LeafKind::Cone { self.cone_radii(iu) } else { (1.0, 1.0) };
+                let r = ra + (rb - ra) * l.z;
+                let xy = DVec3::new(l.x, l.y, 0.0).try_normalize().unwrap_or(DVec3::X);
+                // The gradient of |xy| - r(z).
+                xy - DVec3::Z * (rb - ra) * if r >= 0.0 { 1.0 } else { -1.0 }
+            }
+        };
+        // Normalised first: an ellipsoid's local point may be far from unit
+        // length only through rounding, but f32 must not see a tiny vector.
+        world_normal(&self.to_local[iu], nl.normalize_or(DVec3::Z).as_vec3())
+    }
+}
