@@ -159,3 +159,24 @@ fn bad_rays_are_reported_and_skipped() {
     }
     assert!(err.contains("r.csv:3"), "error lines name the file and line: {err}");
 }
+
+/// A `matrix` is singular relative to its own size: a sheared matrix of a
+/// solid 1e-6 across (determinant 1e-18) loads, one whose third column is
+/// the first plus 1e-13 of another (determinant 1e-13 of its columns'
+/// lengths) is refused, at any scale.
+#[test]
+fn matrix_singularity_is_relative_to_its_size() {
+    let small =
+        r#"{"transformed":{"matrix":[1e-6,5e-7,0,0, 0,1e-6,0,0, 0,0,1e-6,0, 0,0,0,1],"shape":{"sphere":{"center":[0,0,0],"radius":1}}}}"#;
+    let dir = tmpdir("tiny-matrix");
+    let f = dir.join("s.json");
+    std::fs::write(&f, scene_with(small)).unwrap();
+    let out = rothray().args(["render"]).arg(&f).args(["-o"]).arg(dir.join("x.png")).output().unwrap();
+    assert!(out.status.success(), "a matrix 1e-6 across is not singular: {}", String::from_utf8_lossy(&out.stderr));
+    for (s, tiny) in [("1", "1e-13"), ("1e6", "1e-7")] {
+        let flat = format!(
+            r#"{{"transformed":{{"matrix":[{s},0,{s},0, 0,{s},0,0, 0,0,{tiny},0, 0,0,0,1],"shape":{{"sphere":{{"center":[0,0,0],"radius":1}}}}}}}}"#
+        );
+        expect_error(&scene_with(&flat), &["objects[0].shape.union[1].transformed.matrix", "singular", "1e-12"]);
+    }
+}

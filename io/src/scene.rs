@@ -533,9 +533,20 @@ fn parse_shape(cx: &mut Ctx, v: &Value, at: &At) -> R<Entity> {
                 }
                 // Row-major in the file; glam is column-major.
                 let m4 = DMat4::from_cols_array(&r).transpose();
+                // Singular relative to its own size: the determinant against
+                // the product of its columns' lengths (1 for a rotation times
+                // a scale, whatever the scale; an absolute bound refused every
+                // matrix of a solid 1e-6 across).
                 let det = m4.determinant();
-                if !(det.abs() > 1e-12) {
-                    return cx.err(&mat, format!("matrix is singular (determinant {det})"));
+                let cols = m4.x_axis.truncate().length() * m4.y_axis.truncate().length() * m4.z_axis.truncate().length();
+                if !(det.abs() > 1e-12 * cols) {
+                    return cx.err(
+                        &mat,
+                        format!(
+                            "matrix is singular (determinant {det:e}, {:e} of the product of its column lengths; at least 1e-12 is needed)",
+                            det.abs() / cols
+                        ),
+                    );
                 }
                 Transform::from_mat4(m4)
             } else {
