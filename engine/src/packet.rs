@@ -280,6 +280,20 @@ pub(crate) fn set_packet_paths(scene: &mut RenderScene, mut pm: Vec<u32>) {
     scene.packet_meshes = pm;
 }
 
+/// [`packet_cover`] by a walk of every object's tree (the tests' oracle).
+#[cfg(test)]
+pub(crate) fn packet_cover_by_walk(scene: &RenderScene, pm: &[u32]) -> Option<Vec<u32>> {
+    scene
+        .objects
+        .iter()
+        .map(|o| {
+            let mut c = Vec::new();
+            containing_leaves(&scene.program, o.root, &mut c);
+            c.into_iter().find(|l| pm.contains(l))
+        })
+        .collect()
+}
+
 /// Per object, a leaf of `pm` containing its solid, when every object has
 /// one. A leaf lies in one object's tree, so with more objects than leaves
 /// in `pm` some object has none: no walk is needed to know.
