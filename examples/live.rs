@@ -131,8 +131,11 @@ fn live(a: &Args) {
         println!("{how}: nothing changed: median {:.3} ms", median(&mut idle));
         println!("{how}: move 1, sync, pick: median {:.3} ms", median(&mut one));
 
-        let (mut synced, mut pick, mut shown) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut synced, mut pick, mut shown, mut tiled) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut hits = 0;
+        // A tile state as long-lived as a tool's render thread keeps it.
+        let mut ts = TileScratch::default();
+        scene.prepare_tile(&nothing_seen(&scene), &mut ts);
         for _ in 0..a.frames {
             let moved = move_some(&mut world, &roots, a.moving, &mut rng);
             let t = Instant::now();
@@ -144,13 +147,20 @@ fn live(a: &Args) {
             pick.push(ms(t));
             hits += hit.is_some() as usize;
             let t = Instant::now();
+            std::hint::black_box(scene.prepare_tile(&nothing_seen(&scene), &mut ts));
+            tiled.push(ms(t));
+            let t = Instant::now();
             std::hint::black_box(preview(&scene));
             shown.push(ms(t));
         }
         if a.frames > 0 {
             let (s, p, v) = (median(&mut synced), median(&mut pick), median(&mut shown));
             println!("{how}: move {}, sync: median {s:.3} ms; pick: median {p:.4} ms ({hits} of {} picks hit)", a.moving, a.frames);
-            println!("{how}: move {}, preview {PREVIEW_W}x{PREVIEW_H}: median {v:.3} ms", a.moving);
+            let f = median(&mut tiled);
+            println!(
+                "{how}: move {}, first tile after the sync: median {f:.4} ms; preview {PREVIEW_W}x{PREVIEW_H}: median {v:.3} ms",
+                a.moving
+            );
         }
     }
     // After all those frames of refits: the live trees against fresh ones.
@@ -185,6 +195,14 @@ fn preview(scene: &RenderScene) -> Vec<u8> {
         part: Part::WHOLE,
     };
     render(scene, &cam, &s, &|_, _| {}).0
+}
+
+/// A tile region that meets no object (from a corner of the scene, facing
+/// away): preparing it costs what a tile state pays to follow the sync.
+fn nothing_seen(scene: &RenderScene) -> rothray::primitives::frustum::Frustum {
+    let (d, u, v) = (Vec3::ONE, Vec3::new(0.1, -0.1, 0.0), Vec3::new(0.1, 0.1, -0.2));
+    let edges = [d + u + v, d - u + v, d - u - v, d + u - v];
+    rothray::primitives::frustum::Frustum::pyramid(scene.bounds.max + Vec3::splat(1.0), edges)
 }
 
 /// Traces the same rays through the live scene (its objects' tree refit

@@ -452,4 +452,3 @@ fn update_scene_bounds(scene: &mut RenderScene) {
     let bounds = if scene.objects_cull.nodes.is_empty() { scene_bounds(scene) } else { scene.objects_cull.bounds() };
     set_scene_bounds(scene, bounds);
 }
-

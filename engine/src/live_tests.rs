@@ -9,8 +9,8 @@ use rand::{rngs::SmallRng, Rng, SeedableRng};
 use std::sync::Arc;
 
 use crate::live::LiveCounts;
-use rothray_csg::FollowCounts;
 use crate::*;
+use rothray_csg::FollowCounts;
 
 fn seed_from_env(default: u64) -> u64 {
     let seed = std::env::var("ROTHRAY_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(default);
