@@ -53,7 +53,8 @@ pub struct TileCounts {
 }
 
 /// A per-thread copy of a baked program with the nodes of the current tile
-/// appended. Reused from tile to tile (no allocation once warm).
+/// appended. Reused from tile to tile (no allocation once warm) and from
+/// sync to sync: the copy takes only the rows a live sync rewrote.
 #[derive(Default)]
 pub struct TileProgram {
     /// The baked program followed by the tile's nodes: what the tile's rays

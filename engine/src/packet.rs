@@ -231,8 +231,9 @@ pub(crate) fn bake_packet_paths(scene: &mut RenderScene) {
 
 /// The packet path's tables for the nearest-mode meshes `pm` (as
 /// [`nearest_mode_meshes`] lists them over every object): none past
-/// [`PACKET_MESHES`]. Costs the work of a walk of every tree only for scenes
-/// with at most as many objects as packet meshes, or few leaves.
+/// [`PACKET_MESHES`]. Walks trees only in scenes with at most as many
+/// objects as packet meshes, or with few leaves (the shortcut): a live
+/// sync of a large scene pays nothing here.
 pub(crate) fn set_packet_paths(scene: &mut RenderScene, mut pm: Vec<u32>) {
     if pm.len() > PACKET_MESHES {
         pm.clear();

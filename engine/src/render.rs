@@ -371,6 +371,9 @@ fn render_impl(
     let mut lchunks: Vec<Option<&mut [Vec3]>> =
         if !lin.is_empty() { lin.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
     let frame = Frame { scene, s, rays, spp, w, flat, normals, bg8 };
+    // Rayon calls the init once per job, not per thread: workers lent by the
+    // scene keep their tile programs' copies of its program from render to
+    // render (a sync costs them the rows it rewrote; see `crate::workers`).
     out.par_chunks_mut(w * rows * 3).zip(dchunks.par_iter_mut().zip(lchunks.par_iter_mut())).enumerate().for_each_init(
         || (scene.workers.lend(), Vec::new()),
         |(wk, blocks), (ci, (orows, (drows, lrows)))| {
