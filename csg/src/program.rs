@@ -617,7 +617,7 @@ impl Program {
     fn wide_of(&self, n: usize) -> &Wide {
         let w = self.wide[n] as usize;
         match self.wides.get(w) {
-            Some(x) => &**x,
+            Some(x) => x,
             None => &self.local_wides[w - self.wides.len()],
         }
     }
