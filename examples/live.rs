@@ -1,7 +1,9 @@
 //! A live scene: N objects (each a box minus a sphere) in the tool's own
 //! `hecs::World`, some moving every frame; each frame syncs the baked scene
-//! and picks once. Prints medians of the sync and pick times (CPU time of
-//! the process; `ROTHRAY_WALL=1` for wall time).
+//! and picks once; with `--moving`, each frame also renders a small preview
+//! (as a tool's viewport would). Prints medians of the sync, pick and
+//! preview times (CPU time of the process, all threads; `ROTHRAY_WALL=1` for
+//! wall time).
 //!
 //! ```text
 //! cargo run --release --example live                       # 10 000 objects, 100 moving, 100 frames
@@ -129,8 +131,11 @@ fn live(a: &Args) {
         println!("{how}: nothing changed: median {:.3} ms", median(&mut idle));
         println!("{how}: move 1, sync, pick: median {:.3} ms", median(&mut one));
 
-        let (mut synced, mut pick) = (Vec::new(), Vec::new());
+        let (mut synced, mut pick, mut shown, mut tiled) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut hits = 0;
+        // A tile state as long-lived as a tool's render thread keeps it.
+        let mut ts = TileScratch::default();
+        scene.prepare_tile(&nothing_seen(&scene), &mut ts);
         for _ in 0..a.frames {
             let moved = move_some(&mut world, &roots, a.moving, &mut rng);
             let t = Instant::now();
@@ -141,10 +146,21 @@ fn live(a: &Args) {
             let hit = scene.intersect(&ray);
             pick.push(ms(t));
             hits += hit.is_some() as usize;
+            let t = Instant::now();
+            std::hint::black_box(scene.prepare_tile(&nothing_seen(&scene), &mut ts));
+            tiled.push(ms(t));
+            let t = Instant::now();
+            std::hint::black_box(preview(&scene));
+            shown.push(ms(t));
         }
         if a.frames > 0 {
-            let (s, p) = (median(&mut synced), median(&mut pick));
+            let (s, p, v) = (median(&mut synced), median(&mut pick), median(&mut shown));
             println!("{how}: move {}, sync: median {s:.3} ms; pick: median {p:.4} ms ({hits} of {} picks hit)", a.moving, a.frames);
+            let f = median(&mut tiled);
+            println!(
+                "{how}: move {}, first tile after the sync: median {f:.4} ms; preview {PREVIEW_W}x{PREVIEW_H}: median {v:.3} ms",
+                a.moving
+            );
         }
     }
     // After all those frames of refits: the live trees against fresh ones.
@@ -156,6 +172,37 @@ fn live(a: &Args) {
     println!("move all {}, sync: {:.1} ms", a.objects, ms(t));
     let (peak, now) = rss();
     println!("peak RSS {:.1} MB, RSS {:.1} MB", peak as f64 / 1e6, now as f64 / 1e6);
+}
+
+/// The preview's size in pixels: a tool's small viewport.
+const PREVIEW_W: u32 = 128;
+const PREVIEW_H: u32 = 72;
+
+/// A tool's preview after a sync: a small flat picture from a point inside
+/// the scene looking at its centre (its rays meet a few objects each, so the
+/// frame's fixed costs show, the tile level's among them).
+fn preview(scene: &RenderScene) -> Vec<u8> {
+    let c = scene.bounds.center();
+    let cam = Camera { eye: c + (scene.bounds.max - scene.bounds.min) * 0.2, target: c, up: Vec3::Y, fov_y_deg: 40.0 };
+    let s = RenderSettings {
+        width: PREVIEW_W,
+        height: PREVIEW_H,
+        spp: 1,
+        aov: Aov::Shaded,
+        background: Vec3::ZERO,
+        lights: Vec::new(),
+        ambient: 1.0,
+        part: Part::WHOLE,
+    };
+    render(scene, &cam, &s, &|_, _| {}).0
+}
+
+/// A tile region that meets no object (from a corner of the scene, facing
+/// away): preparing it costs what a tile state pays to follow the sync.
+fn nothing_seen(scene: &RenderScene) -> rothray::primitives::frustum::Frustum {
+    let (d, u, v) = (Vec3::ONE, Vec3::new(0.1, -0.1, 0.0), Vec3::new(0.1, 0.1, -0.2));
+    let edges = [d + u + v, d - u + v, d - u - v, d + u - v];
+    rothray::primitives::frustum::Frustum::pyramid(scene.bounds.max + Vec3::splat(1.0), edges)
 }
 
 /// Traces the same rays through the live scene (its objects' tree refit

@@ -17,12 +17,16 @@
 #![warn(missing_docs)]
 
 pub mod counts;
+pub mod edits;
+mod follow;
 pub mod program;
 pub mod spans;
 pub mod spans8;
 pub mod tile;
 
 pub use counts::{take_eval_counts, EvalCounts};
+pub use edits::{Edit, EditLog};
+pub use follow::FollowCounts;
 pub use program::{first_surface, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 pub use spans::{combine, spill_count, Op, SpanList};
 pub use tile::{TileCounts, TileProgram};

@@ -15,6 +15,7 @@ use rothray_primitives::{
 };
 
 use crate::counts;
+use crate::edits::{Edit, EditLog};
 use crate::spans::{combine_into, Op, SpanList};
 
 /// Nodes with more children than this get a BVH over their children.
@@ -75,8 +76,10 @@ pub struct Program {
     pub leafy: Vec<bool>,
     /// Child node ids of the inner nodes.
     pub children: Vec<u32>,
-    /// BVHs of wide nodes (shared with the per-tile copies of the program).
-    pub wides: Arc<Vec<Wide>>,
+    /// BVHs of wide nodes, each shared with the per-tile copies of the
+    /// program (a live sync replaces the few it re-bakes; a list shared
+    /// whole would be cloned whole).
+    pub wides: Vec<Arc<Wide>>,
     /// Wide nodes of a tile's own (indices from `wides.len()` on; see
     /// [`crate::TileProgram`]); the first `local_len` are in use.
     pub local_wides: Vec<Wide>,
@@ -84,6 +87,8 @@ pub struct Program {
     pub local_len: usize,
     /// Tells bakes apart (per-tile copies follow the program they copy).
     pub id: u64,
+    /// The rows rewritten in place since the bake (see [`Program::record_edit`]).
+    pub edits: EditLog,
 }
 
 /// Per-ray constants of an evaluation: the ray (its range is the range
@@ -494,7 +499,7 @@ impl<'a> ProgramBuilder<'a> {
                 WideTrees::build(ids.len(), |i| bounds[children[ids[i as usize] as usize] as usize], |i| ids[i as usize]);
             drop(ids);
             wide = p.wides.len() as u32;
-            Arc::make_mut(&mut p.wides).push(Wide { bvh, unbounded, packet });
+            p.wides.push(Arc::new(Wide { bvh, unbounded, packet }));
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);
@@ -599,6 +604,14 @@ impl<'a> ProgramBuilder<'a> {
 }
 
 impl Program {
+    /// Records that the rows of `e` were rewritten or appended (a live
+    /// sync's re-baked object): copies of the program take just those rows
+    /// ([`crate::TileProgram::begin`]).
+    pub fn record_edit(&mut self, e: Edit) {
+        let size = self.kind.len() + self.children.len() + self.wides.len();
+        self.edits.record(e, size);
+    }
+
     /// The BVH of wide node `n`.
     #[inline(always)]
     fn wide_of(&self, n: usize) -> &Wide {

@@ -9,7 +9,8 @@
 //! as baked.
 //!
 //! The specialised nodes are appended to a per-thread copy of the baked
-//! program, so they refer to baked nodes and tables by index and the rays of
+//! program (which follows a live program's edits row by row, see
+//! [`crate::EditLog`]), so they refer to baked nodes and tables by index and the rays of
 //! the tile evaluate them with the ordinary evaluator ([`Program::eval`]).
 //! Nodes keep their operands' order, so every ray gets exactly the answer of
 //! the whole program: the operands dropped give no span on any ray of the
@@ -19,6 +20,7 @@ use rothray_primitives::{frustum::Frustum, polytope::Plane, LeafKind, LeafTable}
 
 use rothray_primitives::bvh::BvhNode;
 
+use crate::follow::{FollowCounts, Follower};
 use crate::program::{NodeKind, Program, Wide};
 
 /// Below this depth nodes are kept as baked (the specialisation recurses).
@@ -51,14 +53,16 @@ pub struct TileCounts {
 }
 
 /// A per-thread copy of a baked program with the nodes of the current tile
-/// appended. Reused from tile to tile (no allocation once warm).
+/// appended. Reused from tile to tile (no allocation once warm) and from
+/// sync to sync: the copy takes only the rows a live sync rewrote.
 #[derive(Default)]
 pub struct TileProgram {
     /// The baked program followed by the tile's nodes: what the tile's rays
     /// evaluate.
     pub prog: Program,
-    base_nodes: usize,
-    base_children: usize,
+    /// Which version of which program the first rows of `prog` copy.
+    base: Follower,
+    follow_counts: FollowCounts,
     kids: Vec<u32>,
     planes: Vec<Plane>,
     /// Counts since the last [`TileProgram::take_counts`].
@@ -68,25 +72,18 @@ pub struct TileProgram {
 }
 
 impl TileProgram {
-    /// Starts a tile of `base`: forgets the previous tile's nodes (and copies
-    /// `base` when it is not the program copied last).
+    /// Starts a tile of `base`: forgets the previous tile's nodes, and
+    /// brings the copy of `base` up to date (the rows a live sync rewrote,
+    /// or all of them for another program).
     pub fn begin(&mut self, base: &Program) {
-        if self.prog.id != base.id || self.prog.id == 0 {
-            self.prog = base.clone();
-            self.base_nodes = base.kind.len();
-            self.base_children = base.children.len();
-        }
-        let p = &mut self.prog;
-        let n = self.base_nodes;
-        p.kind.truncate(n);
-        p.first.truncate(n);
-        p.count.truncate(n);
-        p.wide.truncate(n);
-        p.bounds.truncate(n);
-        p.leafy.truncate(n);
-        p.children.truncate(self.base_children);
-        p.local_len = 0;
+        self.base.follow(&mut self.prog, base, &mut self.follow_counts);
         self.kernels8 = false;
+    }
+
+    /// What bringing the copy up to date cost so far (for tests: a sync that
+    /// re-bakes a few objects is followed without a whole copy).
+    pub fn follow_counts(&self) -> FollowCounts {
+        self.follow_counts
     }
 
     /// Has a leaf with a packet kernel ([`LeafTable::has_kernel8`]) been

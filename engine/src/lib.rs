@@ -33,6 +33,7 @@ pub mod components;
 mod entity_hash;
 pub mod knobs;
 mod live;
+mod live_meshes;
 #[cfg(test)]
 mod live_tests;
 mod owners;
@@ -43,6 +44,7 @@ pub mod render;
 mod render_tile;
 pub mod scene;
 pub mod tile;
+mod workers;
 
 pub use bake::{bake_scene, find_objects, fingerprint_world, sync_scene, sync_scene_touched, BakeError};
 pub use components::*;

@@ -5,7 +5,10 @@
 //! into small tables and copies them into the scene's tables: over their old
 //! rows when the sizes match (a move, a new radius, a colour), else at the
 //! end, leaving dead rows that a full bake sweeps away once they outnumber
-//! the live ones. The object trees are binary and refit in place
+//! the live ones. The rows written are recorded in the program's edit log
+//! (`Program::record_edit`): the renderer's per-thread copies of the program
+//! take just those rows. The packet meshes are kept object by object
+//! ([`crate::live_meshes`]). The object trees are binary and refit in place
 //! ([`crate::refit`]); they are rebuilt when the set or order of objects
 //! changes, or when refits have made them worse than [`REBUILD_AT`] times
 //! their cost when built.
@@ -17,8 +20,8 @@
 //! compare leaves by entity.
 
 use hecs::{Entity, World};
-use rothray_csg::{NodeKind, ProgramBuilder};
-use rothray_primitives::{Aabb, LeafKind, LeafTable};
+use rothray_csg::{Edit, NodeKind};
+use rothray_primitives::{Aabb, LeafKind};
 
 use crate::bake::{
     bake_objects, build_object_tree, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, BakeSettings,
@@ -27,7 +30,9 @@ use crate::bake::{
 use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;
 use crate::entity_hash::{EntityMap, EntitySet};
+use crate::live_meshes::MeshObjects;
 use crate::owners::Owners;
+use crate::packet::set_packet_paths;
 use crate::refit::Refit;
 use crate::scene::{ObjectInfo, RenderScene};
 
@@ -53,6 +58,8 @@ pub(crate) struct LiveState {
     index: EntityMap<u32>,
     /// Links of `RenderScene::objects_cull` for refits.
     tree: Refit,
+    /// The objects' packet meshes.
+    meshes: MeshObjects,
     /// Rows of objects that were re-baked elsewhere or are gone.
     dead_leaves: usize,
     settings: BakeSettings,
@@ -126,6 +133,7 @@ fn bake_all(world: &World, scene: &mut RenderScene, live: &mut LiveState, settin
     live.counts.full += 1;
     install_baked(scene, baked);
     link_object_tree(scene, live);
+    live.meshes.rebuild(scene);
     Ok(())
 }
 
@@ -156,14 +164,13 @@ fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, ch
         build_object_tree(scene);
         link_object_tree(scene, live);
         scene.redo_window = scene.objects.iter().map(|o| redo_window_of(&scene.program, &scene.leaves, o)).collect();
+        live.meshes.rebuild(scene);
     } else {
         let moved = replace_objects(world, scene, live, &baked);
         refit_object_tree(scene, live, &moved);
     }
     update_scene_bounds(scene);
-    update_packet_paths(scene);
-    // Tile caches key on the program's id.
-    scene.program.id = ProgramBuilder::new(&LeafTable::default()).finish().id;
+    set_packet_paths(scene, live.meshes.packet_meshes());
     scene.bake_count += 1;
     Ok(())
 }
@@ -216,6 +223,7 @@ fn replace_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState,
             moved.push((oi, old_bounds));
         }
         live.slices[oi as usize] = slice;
+        live.meshes.update(scene, oi);
     }
     moved
 }
@@ -406,13 +414,11 @@ fn copy_nodes(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
         let c = shift(src.children[s.children[0] as usize + i], s.nodes, at.nodes);
         put(&mut dst.children, at.children[0] as usize + i, c);
     }
-    if len(s.wides) > 0 {
-        // Clones the list when a tile cache still shares it.
-        let wides = std::sync::Arc::make_mut(&mut dst.wides);
-        for i in 0..len(s.wides) as usize {
-            put(wides, at.wides[0] as usize + i, src.wides[s.wides[0] as usize + i].clone());
-        }
+    for i in 0..len(s.wides) as usize {
+        put(&mut dst.wides, at.wides[0] as usize + i, src.wides[s.wides[0] as usize + i].clone());
     }
+    // The tile programs' copies take these rows only.
+    dst.record_edit(Edit { nodes: at.nodes, children: at.children, wides: at.wides });
 }
 
 /// Links the freshly built object tree for refits.
@@ -445,21 +451,4 @@ fn refit_object_tree(scene: &mut RenderScene, live: &mut LiveState, moved: &[(u3
 fn update_scene_bounds(scene: &mut RenderScene) {
     let bounds = if scene.objects_cull.nodes.is_empty() { scene_bounds(scene) } else { scene.objects_cull.bounds() };
     set_scene_bounds(scene, bounds);
-}
-
-/// The packet path's tables. Without meshes: no packet meshes, no cover, no
-/// shortcut, as `bake_packet_paths` makes them. With meshes (the mesh
-/// assets are shared, not re-baked): `bake_packet_paths` again, over the
-/// whole scene (a pass over its objects' trees and, below
-/// `SHORTCUT_LEAVES`, its leaves; no BVH is built). Dead rows may keep a
-/// live scene from the shortcut that a fresh bake takes: the shortcut only
-/// skips work, the answers are the same.
-fn update_packet_paths(scene: &mut RenderScene) {
-    if scene.leaves.meshes.is_empty() {
-        scene.packet_meshes.clear();
-        scene.packet_cover = scene.objects.is_empty().then(Vec::new);
-        scene.shortcut = None;
-    } else {
-        crate::packet::bake_packet_paths(scene);
-    }
 }

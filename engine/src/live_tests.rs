@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use crate::live::LiveCounts;
 use crate::*;
+use rothray_csg::FollowCounts;
 
 fn seed_from_env(default: u64) -> u64 {
     let seed = std::env::var("ROTHRAY_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(default);
@@ -293,6 +294,55 @@ fn compare_pictures(live: &RenderScene, fresh: &RenderScene, what: &str) {
     assert!(a == b, "{what}: the normal pictures differ");
 }
 
+/// Tile states that live as long as a live scene, as a tool's render
+/// threads keep them: each copies the scene's program once and then follows
+/// its syncs edit by edit (`rothray_csg::EditLog`).
+struct LongLivedTiles {
+    /// Prepared after every sync.
+    each: TileScratch,
+    /// Prepared after every few syncs (several versions behind).
+    some: TileScratch,
+    packets: PacketScratch,
+}
+
+impl LongLivedTiles {
+    fn new() -> Self {
+        LongLivedTiles { each: TileScratch::default(), some: TileScratch::default(), packets: PacketScratch::default() }
+    }
+}
+
+/// Every tile of a small picture of `live` through the long-lived tile
+/// states answers as the fresh bake does ray by ray (nearest hits with
+/// normals, any-hit): a row a sync rewrote and a copy missed would show.
+fn compare_tiles(live: &RenderScene, tiles: &mut LongLivedTiles, fresh: &RenderScene, rng: &mut SmallRng, what: &str) {
+    let cam = Camera { eye: v3(rng, 4.0) + Vec3::new(0.0, 6.0, 26.0), target: v3(rng, 3.0), up: Vec3::Y, fov_y_deg: 55.0 };
+    let (w, h) = (48, 32);
+    let rays = cam.rays(w, h);
+    let (tw, th) = tile_size();
+    let states = if rng.gen_bool(0.3) { vec![&mut tiles.each, &mut tiles.some] } else { vec![&mut tiles.each] };
+    for ts in states {
+        for y0 in (0..h as usize).step_by(th) {
+            for x0 in (0..w as usize).step_by(tw) {
+                let (x1, y1) = ((x0 + tw).min(w as usize), (y0 + th).min(h as usize));
+                let any = live.prepare_tile(&rays.tile_region(x0, x1, y0, y1), ts);
+                let px: Vec<(usize, usize)> = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y))).collect();
+                for chunk in px.chunks(8) {
+                    let r: Vec<Ray> = chunk.iter().map(|&(x, y)| rays.ray(x as f32 + 0.5, y as f32 + 0.5)).collect();
+                    let mut got = vec![None; r.len()];
+                    if any {
+                        live.intersect_packet_with(&r, &mut tiles.packets, &mut got, true, Some(&ts.view()));
+                    }
+                    for (k, ray) in r.iter().enumerate() {
+                        assert_eq!(hit_key(live, got[k]), hit_key(fresh, fresh.intersect(ray)), "{what}: tile ({x0}, {y0}) ray {ray:?}");
+                        let occluded = any && live.occluded_in(ray, &mut tiles.packets.scratch, Some(&ts.view()));
+                        assert_eq!(occluded, fresh.occluded(ray), "{what}: tile ({x0}, {y0}) any-hit {ray:?}");
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Every answer of `live` equals that of `fresh` on random rays and points.
 fn compare(live: &RenderScene, fresh: &RenderScene, rng: &mut SmallRng, what: &str) {
     let objs = |s: &RenderScene| -> Vec<String> {
@@ -322,6 +372,24 @@ fn compare(live: &RenderScene, fresh: &RenderScene, rng: &mut SmallRng, what: &s
     }
 }
 
+/// The packet tables that a live scene keeps object by object are what a
+/// walk of every object's tree makes of it.
+fn check_packet_paths(scene: &RenderScene, what: &str) {
+    let mut pm = crate::packet::nearest_mode_meshes(&scene.program, &scene.leaves, scene.objects.iter().map(|o| o.root));
+    if pm.len() > PACKET_MESHES {
+        pm.clear();
+    }
+    assert_eq!(scene.packet_meshes, pm, "{what}: packet meshes");
+    assert_eq!(scene.packet_cover, crate::packet::packet_cover_by_walk(scene, &pm), "{what}: packet cover");
+}
+
+fn add_follow(total: &mut FollowCounts, tiles: &LongLivedTiles) {
+    for ts in [&tiles.each, &tiles.some] {
+        total.copies += ts.follow_counts().copies;
+        total.edits += ts.follow_counts().edits;
+    }
+}
+
 fn add_counts(total: &mut LiveCounts, c: LiveCounts) {
     total.full += c.full;
     total.partial += c.partial;
@@ -338,12 +406,14 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
     let mut rng = SmallRng::seed_from_u64(seed);
     let mesh = cube_mesh();
     let (mut total, mut last) = (LiveCounts::default(), LiveCounts::default());
+    let mut follow = FollowCounts::default();
     for world_no in 0..6 {
         let mut world = World::new();
         for _ in 0..rng.gen_range(0..12) {
             spawn_object(&mut world, &mut rng, &mesh);
         }
         let mut scene = RenderScene::default();
+        let mut tiles = LongLivedTiles::new();
         let mut log = Vec::new();
         // Odd worlds sync with the list of touched entities (now and then
         // with a full scan in between).
@@ -363,9 +433,10 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
                 Ok(fresh) => {
                     assert!(got.is_ok(), "{what}: live sync failed ({got:?}) where a fresh bake works");
                     compare(&scene, &fresh, &mut rng, &what);
-                    if step % 10 == 0 {
-                        compare_pictures(&scene, &fresh, &what);
-                    }
+                    check_packet_paths(&scene, &what);
+                    compare_tiles(&scene, &mut tiles, &fresh, &mut rng, &what);
+                    // (The renderer's workers live as long as the scene.)
+                    compare_pictures(&scene, &fresh, &what);
                 }
                 Err(e) => assert_eq!(got.err(), Some(e), "{what}: errors"),
             }
@@ -376,9 +447,11 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
             }
         }
         add_counts(&mut total, std::mem::take(&mut last));
+        add_follow(&mut follow, &tiles);
     }
-    println!("{total:?}");
+    println!("{total:?}; tile copies: {follow:?}");
     assert!(total.full > 0 && total.partial > 50 && total.in_place > 0 && total.appended > 0, "every path ran: {total:?}");
+    assert!(follow.edits > 0 && follow.copies > 0, "the tile copies followed edits and copied whole programs: {follow:?}");
 }
 
 /// Many objects moving a few at a time: the refit trees (and their rebuild
@@ -396,6 +469,7 @@ fn live_refits_many_objects_like_a_fresh_bake() {
         })
         .collect();
     let mut scene = RenderScene::default();
+    let mut tiles = LongLivedTiles::new();
     sync_scene(&mut world, &mut scene).unwrap();
     for round in 0..60 {
         for _ in 0..rng.gen_range(1..40) {
@@ -413,15 +487,20 @@ fn live_refits_many_objects_like_a_fresh_bake() {
         }
         assert!(sync_scene(&mut world, &mut scene).unwrap());
         assert!(!sync_scene(&mut world, &mut scene).unwrap(), "nothing changed, nothing baked");
+        let fresh = RenderScene::from_world(&world).unwrap();
+        compare_tiles(&scene, &mut tiles, &fresh, &mut rng, &format!("seed {seed} round {round}"));
         if round % 10 == 9 {
-            let fresh = RenderScene::from_world(&world).unwrap();
             compare(&scene, &fresh, &mut rng, &format!("seed {seed} round {round}"));
             compare_pictures(&scene, &fresh, &format!("seed {seed} round {round}"));
         }
     }
     let c = scene.live.as_ref().unwrap().counts;
-    println!("{c:?}");
+    let f = tiles.each.follow_counts();
+    println!("{c:?}; tile copies: {f:?}");
     assert!(c.partial >= 60 && c.in_place > 0 && c.appended > 0 && c.rebuilds > 0, "every path ran: {c:?}");
+    // A sync that re-bakes a few objects costs a tile state their rows, not
+    // a copy of the program: it copies once per full bake.
+    assert!(f.copies <= c.full && f.edits > 0, "the tile state followed the syncs edit by edit: {f:?}, {c:?}");
 }
 
 /// A mesh object: the shared asset under a random scale, turn and place,
@@ -488,6 +567,7 @@ fn live_meshes_sync_by_object_like_a_fresh_bake() {
             shortcut += scene.shortcut.is_some() as u32;
             let fresh = RenderScene::from_world(&world).unwrap();
             compare(&scene, &fresh, &mut rng, &what);
+            check_packet_paths(&scene, &what);
             if step % 4 == 0 {
                 compare_pictures(&scene, &fresh, &what);
             }

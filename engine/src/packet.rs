@@ -158,7 +158,7 @@ pub struct PacketScratch {
 /// The mesh leaves of `roots` that a nearest-hit evaluation queries in nearest
 /// mode: those with no intersection's first operand on their path (that operand
 /// is evaluated in full, see `Program::child_mode`).
-fn nearest_mode_meshes(program: &Program, leaves: &LeafTable, roots: impl Iterator<Item = u32>) -> Vec<u32> {
+pub(crate) fn nearest_mode_meshes(program: &Program, leaves: &LeafTable, roots: impl Iterator<Item = u32>) -> Vec<u32> {
     let mut found = Vec::new();
     let mut stack: Vec<u32> = roots.collect();
     while let Some(n) = stack.pop() {
@@ -225,19 +225,20 @@ fn ready_memo(memo: &mut PacketMemo, ctx: &[RayCtx; 8], tile: Option<&TileView>)
 /// packet, the objects they cover, and the [`Shortcut`] for scenes with few
 /// leaves. Runs after the program and objects are baked.
 pub(crate) fn bake_packet_paths(scene: &mut RenderScene) {
-    let mut pm = nearest_mode_meshes(&scene.program, &scene.leaves, scene.objects.iter().map(|o| o.root));
+    let pm = nearest_mode_meshes(&scene.program, &scene.leaves, scene.objects.iter().map(|o| o.root));
+    set_packet_paths(scene, pm);
+}
+
+/// The packet path's tables for the nearest-mode meshes `pm` (as
+/// [`nearest_mode_meshes`] lists them over every object): none past
+/// [`PACKET_MESHES`]. Walks trees only in scenes with at most as many
+/// objects as packet meshes, or with few leaves (the shortcut): a live
+/// sync of a large scene pays nothing here.
+pub(crate) fn set_packet_paths(scene: &mut RenderScene, mut pm: Vec<u32>) {
     if pm.len() > PACKET_MESHES {
         pm.clear();
     }
-    scene.packet_cover = scene
-        .objects
-        .iter()
-        .map(|o| {
-            let mut c = Vec::new();
-            containing_leaves(&scene.program, o.root, &mut c);
-            c.into_iter().find(|l| pm.contains(l))
-        })
-        .collect();
+    scene.packet_cover = packet_cover(scene, &pm);
     scene.shortcut = if pm.is_empty() || scene.leaves.len() > pm.len() + SHORTCUT_LEAVES {
         None
     } else {
@@ -278,6 +279,38 @@ pub(crate) fn bake_packet_paths(scene: &mut RenderScene) {
         owner.iter().any(|&o| o != u32::MAX).then_some(Shortcut { others, exact, owner, cutters, cutter_of })
     };
     scene.packet_meshes = pm;
+}
+
+/// [`packet_cover`] by a walk of every object's tree (the tests' oracle).
+#[cfg(test)]
+pub(crate) fn packet_cover_by_walk(scene: &RenderScene, pm: &[u32]) -> Option<Vec<u32>> {
+    scene
+        .objects
+        .iter()
+        .map(|o| {
+            let mut c = Vec::new();
+            containing_leaves(&scene.program, o.root, &mut c);
+            c.into_iter().find(|l| pm.contains(l))
+        })
+        .collect()
+}
+
+/// Per object, a leaf of `pm` containing its solid, when every object has
+/// one. A leaf lies in one object's tree, so with more objects than leaves
+/// in `pm` some object has none: no walk is needed to know.
+fn packet_cover(scene: &RenderScene, pm: &[u32]) -> Option<Vec<u32>> {
+    if scene.objects.len() > pm.len() {
+        return None;
+    }
+    scene
+        .objects
+        .iter()
+        .map(|o| {
+            let mut c = Vec::new();
+            containing_leaves(&scene.program, o.root, &mut c);
+            c.into_iter().find(|l| pm.contains(l))
+        })
+        .collect()
 }
 
 impl RenderScene {

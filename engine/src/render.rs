@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use rothray_csg::{take_eval_counts, EvalCounts};
 
 use crate::part::Part;
-use crate::render_tile::{render_tile, Frame, Rows, Worker};
+use crate::render_tile::{render_tile, Frame, Rows};
 use crate::scene::{Hit, Ray, RenderScene};
 use crate::tile::TileStats;
 use rothray_primitives::frustum::Frustum;
@@ -371,8 +371,11 @@ fn render_impl(
     let mut lchunks: Vec<Option<&mut [Vec3]>> =
         if !lin.is_empty() { lin.chunks_mut(w * rows).map(Some).collect() } else { (0..nchunks).map(|_| None).collect() };
     let frame = Frame { scene, s, rays, spp, w, flat, normals, bg8 };
+    // Rayon calls the init once per job, not per thread: workers lent by the
+    // scene keep their tile programs' copies of its program from render to
+    // render (a sync costs them the rows it rewrote; see `crate::workers`).
     out.par_chunks_mut(w * rows * 3).zip(dchunks.par_iter_mut().zip(lchunks.par_iter_mut())).enumerate().for_each_init(
-        || (Worker::default(), Vec::new()),
+        || (scene.workers.lend(), Vec::new()),
         |(wk, blocks), (ci, (orows, (drows, lrows)))| {
             let rows_here = orows.len() / (3 * w);
             let mut part =

@@ -112,6 +112,8 @@ pub struct RenderScene {
     pub(crate) shortcut: Option<crate::packet::Shortcut>,
     /// Packet queries go ray by ray (see [`RenderScene::set_ray_by_ray`]).
     pub(crate) ray_by_ray: bool,
+    /// The renderer's workers between renders (see [`crate::workers`]).
+    pub(crate) workers: crate::workers::WorkerPool,
 }
 
 thread_local! {

@@ -34,8 +34,6 @@ pub struct TileScratch {
     /// packet of the tile's rays walks together,
     /// `PacketMemo::walk_unions_for`)?
     unions: bool,
-    /// Program the tables above were made for.
-    program_id: u64,
     /// Counts since the last [`TileScratch::take_counts`].
     counts: TileStats,
 }
@@ -109,6 +107,12 @@ impl TileScratch {
         }
     }
 
+    /// What keeping the tile program's copy of the scene's program up to
+    /// date cost so far (whole copies, edits replayed).
+    pub fn follow_counts(&self) -> rothray_csg::FollowCounts {
+        self.tp.follow_counts()
+    }
+
     /// The counts so far, reset.
     pub fn take_counts(&mut self) -> TileStats {
         let mut c = std::mem::take(&mut self.counts);
@@ -123,16 +127,14 @@ impl RenderScene {
     /// left (when none, no ray of the tile hits anything).
     pub fn prepare_tile(&self, region: &Frustum, ts: &mut TileScratch) -> bool {
         ts.tp.begin(&self.program);
-        if ts.program_id != self.program.id || ts.root_of.len() != self.objects.len() {
-            ts.root_of.clear();
-            ts.root_of.resize(self.objects.len(), NONE);
-            ts.live.clear();
-            ts.program_id = self.program.id;
-        }
+        // Only the last tile's objects have a root: resetting them leaves
+        // `root_of` all NONE, whatever program or scene it was made for (a
+        // sync that adds or removes objects costs it their number only).
         for &oi in &ts.live {
             ts.root_of[oi as usize] = NONE;
         }
         ts.live.clear();
+        ts.root_of.resize(self.objects.len(), NONE);
         let TileScratch { tp, root_of, live, .. } = ts;
         let mut keep = |oi: u32| {
             let o = &self.objects[oi as usize];
