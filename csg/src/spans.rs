@@ -330,3 +330,70 @@ pub fn combine_into(op: Op, acc: &mut SpanList, b: &[Span], eps: f32, tmp: &mut 
     acc.clear();
     acc.append(tmp.as_slice());
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    /// A `SpanList` against a `Vec` model under random pushes, appends, pops,
+    /// clears, `truncate_at` and `combine_into` (whose spilled results are
+    /// swapped in), across the inline capacity both ways.
+    #[test]
+    fn span_list_behaves_as_a_vec() {
+        let seed = 0x5a11_0001u64;
+        println!("seed {seed:#x}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let span = |t: f32| Span { t0: t, t1: t + 0.5, s0: Surf::new(1, 0), s1: Surf::new(1, 1) };
+        let (mut list, mut model, mut tmp) = (SpanList::new(), Vec::<Span>::new(), SpanList::new());
+        let mut next = 0.0f32;
+        let mut longest = 0;
+        for step in 0..20_000 {
+            match rng.gen_range(0..10) {
+                0..=3 => {
+                    list.push(span(next));
+                    model.push(span(next));
+                    next += 1.0;
+                }
+                4 => {
+                    let n = rng.gen_range(0..12);
+                    let s: Vec<Span> = (0..n).map(|k| span(next + k as f32)).collect();
+                    next += n as f32;
+                    list.append(&s);
+                    model.extend_from_slice(&s);
+                }
+                5 | 6 => assert_eq!(list.pop(), model.pop(), "step {step}"),
+                7 => {
+                    let t = rng.gen_range(0.0..next.max(1.0));
+                    list.truncate_at(t);
+                    while model.last().is_some_and(|l| l.t0 >= t) {
+                        model.pop();
+                    }
+                    if let Some(l) = model.last_mut() {
+                        if l.t1 > t {
+                            (l.t1, l.s1) = (t, Surf::NONE);
+                        }
+                    }
+                }
+                8 => {
+                    // A union with a list past every span: the result is both.
+                    let b: Vec<Span> = (0..rng.gen_range(1..12)).map(|k| span(next + 1.0 + k as f32)).collect();
+                    next += 13.0;
+                    combine_into(Op::Union, &mut list, &b, 1e-3, &mut tmp);
+                    model.extend_from_slice(&b);
+                }
+                _ => {
+                    if rng.gen_bool(0.2) {
+                        list.clear();
+                        model.clear();
+                        next = 0.0;
+                    }
+                }
+            }
+            longest = longest.max(model.len());
+            assert_eq!(list.as_slice(), &model[..], "step {step}");
+            assert_eq!((list.len(), list.is_empty(), list.last()), (model.len(), model.is_empty(), model.last()), "step {step}");
+        }
+        assert!(longest > 2 * INLINE_SPANS, "the lists should spill ({longest} spans at most)");
+    }
+}
