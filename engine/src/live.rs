@@ -21,7 +21,7 @@
 
 use hecs::{Entity, World};
 use rothray_csg::{Edit, NodeKind};
-use rothray_primitives::{Aabb, LeafKind};
+use rothray_primitives::{Aabb, LeafKind, LeafTable};
 
 use crate::bake::{
     bake_objects, build_object_tree, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, BakeSettings,
