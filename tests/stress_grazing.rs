@@ -13,8 +13,8 @@ use glam::{DAffine3, DMat3, DVec3};
 use rand::{rngs::SmallRng, Rng};
 
 use crate::oracle::*;
-use crate::stress::{r32, rv};
 use crate::oracle::{octa_mesh, remove_mesh_files};
+use crate::stress::{r32, rv};
 use crate::stress_tangent::{across, tally, Aim, Family};
 
 /// `dir` tilted towards unit `n` by an angle of 1e-7..1e-2 rad (either
