@@ -1198,7 +1198,8 @@ impl MeshData {
 
     /// Crossing `c`'s t refined in f64 from its triangle's plane, `n . (v0 -
     /// o) / n . d` with the f32 vertices and ray exact in f64, rounded once,
-    /// then clamped to `[lo, w.tmax]` (`lo` at least `w.tmin`): the f32
+    /// then clamped to `[lo, w.tmax]` (`lo` at least `w.tmin`, and past `lo`
+    /// where the f32 t was): the f32
     /// watertight test works relative to the ray's origin, and put an end
     /// where the ray runs at angle `a` to the face ~1e-8 of the origin's
     /// distance / sin(a) off (tests/stress_data.rs). The clamp keeps the
@@ -1208,18 +1209,23 @@ impl MeshData {
     #[inline]
     fn refine(&self, c: &Crossing, w: &Walk, lo: f32) -> f32 {
         let [a, b, e] = self.tris[c.slot as usize].map(|v| v.as_dvec3());
-        let n = (b - a).cross(e - a);
-        let den = n.dot(w.d.as_dvec3());
+        let (n, dd) = ((b - a).cross(e - a), w.d.as_dvec3());
+        let den = n.dot(dd);
         let ao = a - w.o.as_dvec3();
         // No further than the f32 test itself may be off (8 f32 epsilons of
-        // the vertex's distance from the origin, stretched by 1 / sin): where
-        // the ray runs so close to the plane that the test's choice of
-        // triangle is itself rounding, the plane's crossing may lie off the
-        // triangle (a mesh octahedron 1e5 out at 1e-5 rad: 0.6 of the view
-        // instead of 0.07 unrefined).
-        let tol = (8.0 * f32::EPSILON as f64) * ao.abs().max_element() * n.abs().element_sum() / den.abs();
+        // the vertex's distance from the origin, stretched by 1 / sin), nor
+        // than the triangle's size along the ray: where the ray runs so close
+        // to the plane that the test's choice of triangle is itself rounding,
+        // the plane's crossing may lie far off the triangle.
+        let size = (b - a).abs().max((e - a).abs()).max_element();
+        let tol =
+            ((8.0 * f32::EPSILON as f64) * ao.abs().max_element() * n.abs().element_sum() / den.abs()).min(size / dd.abs().max_element());
         let t = n.dot(ao) / den;
-        let t = if t.is_finite() { t.clamp(c.t as f64 - tol, c.t as f64 + tol) as f32 } else { c.t };
+        // (max / min, not clamp: no panic whatever the bounds.)
+        let t = if t.is_finite() { t.max(c.t as f64 - tol).min(c.t as f64 + tol) as f32 } else { c.t };
+        // Strictly after `lo` where the f32 t was: a span or gap the f32
+        // walk kept keeps a positive length.
+        let lo = if c.t > lo { lo.next_up() } else { lo };
         t.max(lo.max(w.tmin)).min(w.tmax)
     }
 
