@@ -102,7 +102,8 @@ pub enum LeafKind {
     /// Unit sphere under a map that is not a similarity (an ellipsoid in the
     /// world), traced in local space through its f64 map ([`crate::table64`]).
     Ellipsoid,
-    /// Box `[p0, p1]`.
+    /// Box `[p0, p1]` in its own coordinates (the description's f32
+    /// numbers), traced through its f64 map ([`crate::table64`]).
     Cuboid,
     /// Unit capped cylinder (f64 map, as the ellipsoid).
     Cylinder,
@@ -112,7 +113,9 @@ pub enum LeafKind {
     Cone,
     /// Torus, minor radius (major = 1) in `p0.x` (f64 map, as the ellipsoid).
     Torus,
-    /// Half-space, normal in `p0.xyz`, offset in `p0.w`.
+    /// Half-space, traced against its world plane in f64 (normal, and
+    /// offset relative to the anchor, in its `maps64` entry; see
+    /// [`crate::table64`]); its unit local normal in `p0.xyz` (for shading).
     HalfSpace,
     /// Van Wijk swept sphere (`ext` indexes [`LeafTable::sweeps`]).
     SweptSphere,
@@ -525,9 +528,10 @@ pub struct LeafTable {
     pub gcyls: Vec<Arc<GenCylData>>,
     /// Distinct meshes (a mesh under many transforms is stored once).
     pub meshes: Vec<Arc<MeshData>>,
-    /// Per leaf traced in f64 (tori, ellipsoids, cylinders, cones: see
+    /// Per leaf traced in f64 (tori, ellipsoids, cylinders, cones, boxes: see
     /// [`LeafTable::has_map64`]; indexed by `ext`), its world-to-local map in
-    /// f64: the linear part and the anchor's local point ([`crate::table64`]).
+    /// f64: the linear part and the anchor's local point ([`crate::table64`]);
+    /// per half-space, its f64 world plane relative to the anchor instead.
     pub maps64: Vec<(DMat3, DVec3)>,
     /// Polish tolerance of the torus roots, relative to the minor radius (see
     /// [`kernels::torus_tol`]; a bake sets [`kernels::TORUS_TOLERANCE`] unless
