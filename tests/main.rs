@@ -21,5 +21,6 @@ mod scale_range;
 mod split;
 mod stress;
 mod stress_data;
+mod stress_grazing;
 mod stress_tangent;
 mod tiles;

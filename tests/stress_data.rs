@@ -275,9 +275,9 @@ fn measure(m: &Model, c: DVec3, s: f64, seed: u64) -> (Stats, usize) {
             for (a, b) in g.iter().zip(&w) {
                 let e = (a - b).abs() * dl / view;
                 // A mesh end where the ray runs within 1e-2 rad of the face's
-                // plane: its f32 error across the face (~eps of the distance
-                // from the ray's origin, where the triangle test works) is
-                // stretched along the ray by 1 / sin.
+                // plane: counted apart (an f32 error across the face is
+                // stretched along the ray by 1 / sin; mesh ends are refined
+                // in f64 from their triangle's plane).
                 let sin = match m {
                     Model::Octa(Shape::Octa { c, .. }) => {
                         let n = (o + d * b - *c).signum();
@@ -286,7 +286,7 @@ fn measure(m: &Model, c: DVec3, s: f64, seed: u64) -> (Stats, usize) {
                     _ => 1.0,
                 };
                 if sin < 1e-2 {
-                    st.max_err_long = st.max_err_long.max(e * sin);
+                    st.max_err_long = st.max_err_long.max(e);
                 } else {
                     st.max_err = st.max_err.max(e);
                 }
@@ -301,10 +301,10 @@ fn measure(m: &Model, c: DVec3, s: f64, seed: u64) -> (Stats, usize) {
 
 /// The target of issue 15 for solids with data, at offsets 1e3 to 1e5 and
 /// sizes 1e-5 to 1e4: span ends within 1e-5 of the view, no wrong span count
-/// once chords and gaps under 1e-4 of the view are set aside. Except: a mesh
-/// end where the ray runs within 1e-2 rad of the face is held to 1e-7 of the
-/// view / sin(angle) (the triangle test works in f32 relative to the ray's
-/// origin; measured 1.6e-5 of the view at 8e-4 rad, size 1e2).
+/// once chords and gaps under 1e-4 of the view are set aside; a mesh end
+/// where the ray runs within 1e-2 rad of the face within 1e-6 of the view
+/// (its t refined in f64 from the triangle's plane: with the f32 triangle
+/// test's own t it was 1.6e-5 of the view at 8e-4 rad, size 1e2).
 #[test]
 fn stress_data() {
     let seed = 0x57e5_da7au64;
@@ -312,7 +312,7 @@ fn stress_data() {
     let dir = DVec3::new(0.6, -0.48, 0.64);
     let mut cases: Vec<(String, DVec3, f64)> = [0.0, 1e3, 1e4, 1e5].iter().map(|&o| (format!("offset {o:e}"), dir * o, 1.0)).collect();
     cases.extend([1e-5, 1e-2, 1e2, 1e4].iter().map(|&s| (format!("scale {s:e}"), DVec3::ZERO, s)));
-    println!("| solid | where | max end error / view | mesh ends grazing a face (sin < 1e-2): max error x sin / view | wrong span count |");
+    println!("| solid | where | max end error / view | mesh ends grazing a face (sin < 1e-2): max error / view | wrong span count |");
     println!("|---|---|---|---|---|");
     let mut bad = vec![];
     for (ci, (label, c, s)) in cases.iter().enumerate() {
@@ -320,7 +320,7 @@ fn stress_data() {
             let (st, hits) = measure(&m, *c, *s, seed + (ci * 10 + ki) as u64);
             let graze = if st.max_err_long > 0.0 { format!("{:.1e}", st.max_err_long) } else { "-".into() };
             println!("| {name} | {label} | {:.1e} | {graze} | {} of {} ({hits} hit) |", st.max_err, st.topo, st.rays);
-            if st.max_err > 1e-5 || st.max_err_long > 1e-7 || st.topo > 0 {
+            if st.max_err > 1e-5 || st.max_err_long > 1e-6 || st.topo > 0 {
                 bad.push(format!("{name} at {label}"));
             }
         }

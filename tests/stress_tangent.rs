@@ -16,20 +16,20 @@ use crate::oracle::*;
 use crate::stress::{model_crossings, r32, robust, rv, wrong_count};
 
 /// A point of a surface and a direction tangent to it there.
-type Aim = (DVec3, DVec3);
+pub(crate) type Aim = (DVec3, DVec3);
 
 /// One family of tangent rays: the solid, its size (the view is 4 of them),
 /// and where the rays touch it.
-struct Family {
-    name: &'static str,
-    shape: Shape,
+pub(crate) struct Family {
+    pub(crate) name: &'static str,
+    pub(crate) shape: Shape,
     /// An f32 point near the solid: the model works relative to it (see `Shape::moved`).
-    near: DVec3,
-    size: f64,
-    aim: Box<dyn Fn(&mut SmallRng) -> Aim>,
+    pub(crate) near: DVec3,
+    pub(crate) size: f64,
+    pub(crate) aim: Box<dyn Fn(&mut SmallRng) -> Aim>,
 }
 
-fn unit(rng: &mut SmallRng) -> DVec3 {
+pub(crate) fn unit(rng: &mut SmallRng) -> DVec3 {
     loop {
         let v = rp(rng, 1.0);
         if v.length() > 0.2 && v.length() < 1.0 {
@@ -39,7 +39,7 @@ fn unit(rng: &mut SmallRng) -> DVec3 {
 }
 
 /// A unit vector orthogonal to unit `n`, uniform around it.
-fn across(rng: &mut SmallRng, n: DVec3) -> DVec3 {
+pub(crate) fn across(rng: &mut SmallRng, n: DVec3) -> DVec3 {
     loop {
         let v = unit(rng);
         let w = v - n * v.dot(n);
@@ -166,24 +166,24 @@ fn families(c: DVec3, s: f64) -> Vec<Family> {
 
 /// One family's figures at one place.
 #[derive(Default)]
-struct Tally {
+pub(crate) struct Tally {
     /// Rays with a wrong span count, chords and gaps under 1e-6 / 1e-4 of the view set aside.
-    wrong6: usize,
-    wrong4: usize,
+    pub(crate) wrong6: usize,
+    pub(crate) wrong4: usize,
     /// Largest span end error / view (rays with the model's count, chords >= 1e-6 of the view).
-    err: f64,
+    pub(crate) err: f64,
     /// Model chords of 1e-6..1e-5, 1e-5..1e-4, 1e-4.. of the view.
-    bands: [usize; 3],
+    pub(crate) bands: [usize; 3],
     /// Rays set aside: they lie in a cap's plane to within the model's own
     /// f64 rounding, which then reports many spans of a convex solid (a cap
     /// plane with a small integer normal through f32 points holds ~1 in 300
     /// f32 rays exactly; the engine reports the boundary-inclusive chord).
-    in_plane: usize,
+    pub(crate) in_plane: usize,
 }
 
 /// 400 rays of `fam`, each from 4 sizes away along its tangent, aimed at its
 /// surface point (the f32 rounding of the ray leaves a short chord or a near miss).
-fn tally(fam: &Family, s: f64, seed: u64) -> Tally {
+pub(crate) fn tally(fam: &Family, s: f64, seed: u64) -> Tally {
     let scene = bake(std::slice::from_ref(&fam.shape));
     let model = fam.shape.moved(fam.near);
     let f = |p: DVec3| model.inside(p);
@@ -196,15 +196,23 @@ fn tally(fam: &Family, s: f64, seed: u64) -> Tally {
         let d32 = ((p - o32.as_dvec3()).normalize() * 10f64.powf(rng.gen_range(-1.0..1.0))).as_vec3();
         let (o, d) = (o32.as_dvec3(), d32.as_dvec3());
         let spans: Vec<Span> = scene.spans(&rothray::engine::Ray::new(o32, d32), 0);
-        let got: Vec<f64> = spans.iter().flat_map(|s| [s.t0 as f64, s.t1 as f64]).collect();
         // The model near the aim point, sampled there too: a chord too short
         // for the grid is still seen.
         let dl = d.length();
         let tp = (p - o).dot(d) / (dl * dl);
         let half = 2.0 * fam.size / dl;
+        // The engine's spans cut to the model's window (an unbounded
+        // half-space's span ends at the window's ends on both sides).
+        let (w0, w1) = ((tp - half).max(0.0), tp + half);
+        let got: Vec<f64> = spans
+            .iter()
+            .map(|s| (s.t0 as f64).max(w0)..(s.t1 as f64).min(w1))
+            .filter(|r| r.end > r.start)
+            .flat_map(|r| [r.start, r.end])
+            .collect();
         let mut extra: Vec<f64> = spans.iter().map(|s| 0.5 * (s.t0 as f64 + s.t1 as f64)).collect();
         extra.push(tp);
-        let want = model_crossings(&f, o - fam.near, d, ((tp - half).max(0.0), tp + half), 1000, &extra);
+        let want = model_crossings(&f, o - fam.near, d, (w0, w1), 1000, &extra);
         if want.len() > 2 {
             t.in_plane += 1;
             continue;

@@ -118,6 +118,63 @@ pub fn cuboid(o: Vec3, d: Vec3, mn: Vec3, mx: Vec3) -> Option<Range> {
     }
 }
 
+/// [`cuboid`] in f64, on the local line of a box traced through its f64 map
+/// ([`crate::table64`]); the packet kernel (`kernels8`) repeats its
+/// operations lane by lane.
+#[inline(always)]
+pub fn cuboid64(o: DVec3, d: DVec3, mn: DVec3, mx: DVec3) -> Option<Range64> {
+    let mut t_in = f64::NEG_INFINITY;
+    let mut t_out = f64::INFINITY;
+    let mut s_in = 0;
+    let mut s_out = 0;
+    for a in 0..3 {
+        if d[a] == 0.0 {
+            if o[a] < mn[a] || o[a] > mx[a] {
+                return None;
+            }
+            continue;
+        }
+        let inv = 1.0 / d[a];
+        let ta = (mn[a] - o[a]) * inv;
+        let tb = (mx[a] - o[a]) * inv;
+        let (tn, sn, tf, sf) = if ta <= tb { (ta, a as u32 * 2, tb, a as u32 * 2 + 1) } else { (tb, a as u32 * 2 + 1, ta, a as u32 * 2) };
+        if tn > t_in {
+            t_in = tn;
+            s_in = sn;
+        }
+        if tf < t_out {
+            t_out = tf;
+            s_out = sf;
+        }
+    }
+    if t_in <= t_out {
+        Some((t_in, s_in, t_out, s_out))
+    } else {
+        None
+    }
+}
+
+/// `n . v` in a fixed order, ((n.x v.x + n.y v.y) + n.z v.z), which
+/// the packet kernels repeat.
+#[inline(always)]
+pub fn dot64(n: DVec3, v: DVec3) -> f64 {
+    (n.x * v.x + n.y * v.y) + n.z * v.z
+}
+
+/// [`half_space`] in f64 for `dot(n, q + t d) <= w`: `q` is the ray's origin
+/// relative to the plane's anchor, `n` its world normal, `w` its offset
+/// there ([`crate::table64`]).
+#[inline(always)]
+pub fn half_space64(q: DVec3, d: DVec3, n: DVec3, w: f64) -> Option<Range64> {
+    let den = dot64(n, d);
+    let num = w - dot64(n, q);
+    if den == 0.0 {
+        return if num >= 0.0 { Some((f64::NEG_INFINITY, sub::SIDE, f64::INFINITY, sub::SIDE)) } else { None };
+    }
+    let t = num / den;
+    Some(if den > 0.0 { (f64::NEG_INFINITY, sub::SIDE, t, sub::SIDE) } else { (t, sub::SIDE, f64::INFINITY, sub::SIDE) })
+}
+
 /// [`Range`] in f64: what the f64 kernels ([`cylinder`], [`cone`]) return,
 /// rounded to f32 once, at the end, by [`narrow`].
 pub type Range64 = (f64, u32, f64, u32);

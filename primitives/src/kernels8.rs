@@ -8,21 +8,19 @@
 //! before clipping, bit for bit: the same IEEE operations on the same values
 //! in the same order as the scalar map and kernels (no fused multiply-add,
 //! whose single rounding would differ), with selects where the scalar code
-//! branches. Boxes and half-spaces are solved in f32 (8 lanes a register
-//! with AVX); lanes whose local direction the scalar path would rescale
-//! ([`Ray::dir_rescale`]) are left to it. A ball (a sphere under a
-//! similarity) is solved in f64 from its f32 centre and radius in world
-//! space, ellipsoids and cylinders in f64 through their f64 maps
-//! ([`crate::table64`]), as the scalar path does (every lane done: f64
+//! branches. All of them are solved in f64 (four lanes a register with
+//! AVX), as the scalar path does: a ball (a sphere under a similarity) from
+//! its f32 centre and radius in world space, a half-space against its f64
+//! world plane, ellipsoids, cylinders and boxes through their f64 maps
+//! ([`crate::table64`]); every lane is done (f64
 //! needs no rescaling). The cone and the other kinds have no packet kernel.
 
-use glam::{DMat3, Vec3, Vec3A};
+use glam::{DMat3, Vec3};
 
 use crate::kernels::sub;
-use crate::ray::DIR_SAFE_MAX;
+use crate::simd8::D8;
 #[cfg(target_arch = "x86_64")]
-use crate::simd8::{avx, avx_d, sse, sse_d};
-use crate::simd8::{D8, V8};
+use crate::simd8::{avx_d, sse_d};
 use crate::table::{LeafKind, LeafTable};
 
 /// Per lane, a leaf's unclipped range along the lane's ray (as the scalar
@@ -162,72 +160,58 @@ struct R8<V> {
     s1: V,
 }
 
-/// The all-true mask.
+/// `kernels::cuboid64` on `[mn, mx]` (f64, in the box's frame).
 #[inline(always)]
-fn all<V: V8>() -> V {
-    V::splat(f32::from_bits(u32::MAX))
-}
-
-/// Sub-surface ids travel as small floats (exact) so that selects move them.
-#[inline(always)]
-fn s<V: V8>(id: u32) -> V {
-    V::splat(id as f32)
-}
-
-#[inline(always)]
-fn dot<V: V8>(a: &[V; 3], b: &[V; 3]) -> V {
-    // `Vec3::dot`'s order: (x x' + y y') + z z'.
-    a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
-}
-
-/// `kernels::cuboid` on `[mn, mx]`.
-#[inline(always)]
-fn cuboid<V: V8>(o: &[V; 3], d: &[V; 3], mn: [f32; 3], mx: [f32; 3]) -> R8<V> {
-    let zero = V::splat(0.0);
-    let mut t_in = V::splat(f32::NEG_INFINITY);
-    let mut t_out = V::splat(f32::INFINITY);
+fn cuboid<D: D8>(o: &[D; 3], d: &[D; 3], mn: [f64; 3], mx: [f64; 3]) -> R8<D> {
+    let zero = D::splat(0.0);
+    let mut t_in = D::splat(f64::NEG_INFINITY);
+    let mut t_out = D::splat(f64::INFINITY);
     let (mut s_in, mut s_out) = (zero, zero);
-    let mut miss = zero;
+    let mut ok = all_d::<D>();
     for a in 0..3 {
         let flat = d[a].eq(zero);
-        let (lo, hi) = (V::splat(mn[a]), V::splat(mx[a]));
+        let (lo, hi) = (D::splat(mn[a]), D::splat(mx[a]));
         // A ray parallel to the slab misses when outside it, else skips the axis.
-        miss = miss.or(flat.and(o[a].lt(lo).or(o[a].gt(hi))));
-        let inv = V::splat(1.0).div(d[a]);
+        ok = ok.and(D::select(flat, o[a].ge(lo).and(hi.ge(o[a])), all_d()));
+        let inv = D::splat(1.0).div(d[a]);
         let ta = lo.sub(o[a]).mul(inv);
         let tb = hi.sub(o[a]).mul(inv);
         let ord = ta.le(tb);
-        let tn = V::select(ord, ta, tb);
-        let tf = V::select(ord, tb, ta);
-        let sn = V::select(ord, s(a as u32 * 2), s(a as u32 * 2 + 1));
-        let sf = V::select(ord, s(a as u32 * 2 + 1), s(a as u32 * 2));
-        let up_in = tn.gt(t_in).unless(flat);
-        t_in = V::select(up_in, tn, t_in);
-        s_in = V::select(up_in, sn, s_in);
-        let up_out = tf.lt(t_out).unless(flat);
-        t_out = V::select(up_out, tf, t_out);
-        s_out = V::select(up_out, sf, s_out);
+        let tn = D::select(ord, ta, tb);
+        let tf = D::select(ord, tb, ta);
+        let sd = |id: u32| D::splat(id as f64);
+        let sn = D::select(ord, sd(a as u32 * 2), sd(a as u32 * 2 + 1));
+        let sf = D::select(ord, sd(a as u32 * 2 + 1), sd(a as u32 * 2));
+        let up_in = flat.andnot(tn.gt(t_in));
+        t_in = D::select(up_in, tn, t_in);
+        s_in = D::select(up_in, sn, s_in);
+        let up_out = flat.andnot(t_out.gt(tf));
+        t_out = D::select(up_out, tf, t_out);
+        s_out = D::select(up_out, sf, s_out);
     }
-    R8 { hit: t_in.le(t_out).unless(miss), t0: t_in, s0: s_in, t1: t_out, s1: s_out }
+    R8 { hit: ok.and(t_in.le(t_out)), t0: t_in, s0: s_in, t1: t_out, s1: s_out }
 }
 
-/// `kernels::half_space` for `n . p <= w`.
+/// `kernels::half_space64` for `n . (q + t d) <= w` (f64, world units
+/// relative to the plane's anchor; `dot64`'s order).
 #[inline(always)]
-fn half_space<V: V8>(o: &[V; 3], d: &[V; 3], n: [f32; 3], w: f32) -> R8<V> {
-    let nv = [V::splat(n[0]), V::splat(n[1]), V::splat(n[2])];
-    let den = dot(&nv, d);
-    let num = V::splat(w).sub(dot(&nv, o));
-    let zero = V::splat(0.0);
+fn half_space<D: D8>(q: &[D; 3], d: &[D; 3], n: [f64; 3], w: f64) -> R8<D> {
+    let nv = [D::splat(n[0]), D::splat(n[1]), D::splat(n[2])];
+    let dot = |a: &[D; 3]| nv[0].mul(a[0]).add(nv[1].mul(a[1])).add(nv[2].mul(a[2]));
+    let den = dot(d);
+    let num = D::splat(w).sub(dot(q));
+    let zero = D::splat(0.0);
     let flat = den.eq(zero);
     let t = num.div(den);
     let up = den.gt(zero);
-    let (inf, ninf) = (V::splat(f32::INFINITY), V::splat(f32::NEG_INFINITY));
+    let (inf, ninf) = (D::splat(f64::INFINITY), D::splat(f64::NEG_INFINITY));
+    let side = D::splat(sub::SIDE as f64);
     R8 {
-        hit: V::select(flat, num.ge(zero), all()),
-        t0: V::select(flat, ninf, V::select(up, ninf, t)),
-        s0: s(sub::SIDE),
-        t1: V::select(flat, inf, V::select(up, t, inf)),
-        s1: s(sub::SIDE),
+        hit: D::select(flat, num.ge(zero), all_d()),
+        t0: D::select(flat, ninf, D::select(up, ninf, t)),
+        s0: side,
+        t1: D::select(flat, inf, D::select(up, t, inf)),
+        s1: side,
     }
 }
 
@@ -253,7 +237,7 @@ impl LeafTable {
                 // SAFETY: the CPU has AVX.
                 return unsafe { self.ranges8_avx(i, rays, lanes, out) };
             }
-            self.ranges8_in::<sse::Sse, sse_d::SseD>(i, rays, lanes, out)
+            self.ranges8_in::<sse_d::SseD>(i, rays, lanes, out)
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
@@ -267,54 +251,48 @@ impl LeafTable {
     #[doc(hidden)]
     #[cfg(target_arch = "x86_64")]
     pub fn ranges8_sse(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
-        self.ranges8_in::<sse::Sse, sse_d::SseD>(i, rays, lanes, out)
+        self.ranges8_in::<sse_d::SseD>(i, rays, lanes, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     unsafe fn ranges8_avx(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
-        self.ranges8_in::<avx::Avx, avx_d::AvxD>(i, rays, lanes, out)
+        self.ranges8_in::<avx_d::AvxD>(i, rays, lanes, out)
     }
 
     #[inline(always)]
-    fn ranges8_in<V: V8, D: D8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+    fn ranges8_in<D: D8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let iu = i as usize;
         match self.kind[iu] {
-            LeafKind::Sphere => return self.balls8::<D>(iu, rays, lanes, out),
-            LeafKind::Ellipsoid | LeafKind::Cylinder => return self.quadrics8::<D>(iu, rays, lanes, out),
-            _ => {}
-        }
-        let m = &self.to_local[iu];
-        let anchor = self.anchor[iu];
-        let col = |v: Vec3A| [v.x, v.y, v.z];
-        let (mx, my, mz, tr) = (col(m.matrix3.x_axis), col(m.matrix3.y_axis), col(m.matrix3.z_axis), col(m.translation));
-        // `(Vec3A::from(o) - anchor)` per axis, then `transform_point3a`'s
-        // ((x_axis x + y_axis y) + z_axis z) + translation.
-        let rel = [
-            V::load(&rays.o[0]).sub(V::splat(anchor.x)),
-            V::load(&rays.o[1]).sub(V::splat(anchor.y)),
-            V::load(&rays.o[2]).sub(V::splat(anchor.z)),
-        ];
-        let wd = [V::load(&rays.d[0]), V::load(&rays.d[1]), V::load(&rays.d[2])];
-        let map = |v: &[V; 3], a: usize| V::splat(mx[a]).mul(v[0]).add(V::splat(my[a]).mul(v[1])).add(V::splat(mz[a]).mul(v[2]));
-        let lo: [V; 3] = std::array::from_fn(|a| map(&rel, a).add(V::splat(tr[a])));
-        let ld: [V; 3] = std::array::from_fn(|a| map(&wd, a));
-        // `Ray::dir_rescale(ld)` is `None`: the largest |component| in range.
-        let big = ld[0].abs().max(ld[1].abs()).max(ld[2].abs());
-        let in_range = V::splat(1.0 / DIR_SAFE_MAX).le(big).and(big.le(V::splat(DIR_SAFE_MAX)));
-        let (p0, p1) = (self.p0[iu], self.p1[iu]);
-        let r = match self.kind[iu] {
-            LeafKind::Cuboid => cuboid(&lo, &ld, [p0.x, p0.y, p0.z], [p1.x, p1.y, p1.z]),
-            LeafKind::HalfSpace => half_space(&lo, &ld, [p0.x, p0.y, p0.z], p0.w),
+            LeafKind::Sphere => self.balls8::<D>(iu, rays, lanes, out),
+            LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cuboid => self.quadrics8::<D>(iu, rays, lanes, out),
+            LeafKind::HalfSpace => self.planes8::<D>(iu, rays, lanes, out),
             _ => unreachable!("no packet kernel for {:?}", self.kind[iu]),
-        };
-        let done = in_range.bitmask() & lanes;
-        *out =
-            Ranges8 { done, hit: r.hit.bitmask() & done, t0: r.t0.store(), s0: r.s0.store_u32(), t1: r.t1.store(), s1: r.s1.store_u32() };
+        }
     }
 
-    /// [`LeafTable::ranges8`] of an ellipsoid or a cylinder, as the scalar
-    /// path's `quadric_spans`: the lanes mapped to the leaf's frame in f64
+    /// [`LeafTable::ranges8`] of a half-space, as the scalar path's
+    /// `flat_spans`: the lanes relative to the anchor in f64 (`rel64`),
+    /// against the f64 world plane (`plane64`).
+    #[inline(always)]
+    fn planes8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        let (n, w) = self.plane64(iu);
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
+        let q = [D::widen(&rays.o[0]).sub(D::splat(c.x)), D::widen(&rays.o[1]).sub(D::splat(c.y)), D::widen(&rays.o[2]).sub(D::splat(c.z))];
+        let d = [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])];
+        let r = half_space(&q, &d, [n.x, n.y, n.z], w);
+        *out = Ranges8 {
+            done: lanes,
+            hit: r.hit.bitmask() & lanes,
+            t0: r.t0.narrow(),
+            s0: r.s0.store_u32(),
+            t1: r.t1.narrow(),
+            s1: r.s1.store_u32(),
+        };
+    }
+
+    /// [`LeafTable::ranges8`] of an ellipsoid, a cylinder or a box, as the
+    /// scalar path's `quadric_spans` and `flat_spans`: the lanes mapped to the leaf's frame in f64
     /// (`local64`, `map64`: `(p - anchor)`, then ((x_axis x + y_axis y) +
     /// z_axis z), then the anchor's local point), solved in f64. (No
     /// closures here: one compiled apart from this AVX function made every
@@ -329,6 +307,9 @@ impl LeafTable {
         let ld = [map_row(m, 0, &d), map_row(m, 1, &d), map_row(m, 2, &d)];
         let r = if self.kind[iu] == LeafKind::Cylinder {
             cylinder(&lo, &ld)
+        } else if self.kind[iu] == LeafKind::Cuboid {
+            let (p0, p1) = (self.p0[iu], self.p1[iu]);
+            cuboid(&lo, &ld, [p0.x as f64, p0.y as f64, p0.z as f64], [p1.x as f64, p1.y as f64, p1.z as f64])
         } else {
             let (hit, t0, t1) = ball(&lo, &ld, 1.0);
             let side = D::splat(sub::SIDE as f64);

@@ -37,8 +37,8 @@ fn table(rng: &mut SmallRng) -> LeafTable {
 
 /// Every lane that the packet kernel marks done gets exactly the spans
 /// `spans_in` gives its ray (same t bits, same surfaces, after the same
-/// clipping); the AVX and SSE2 builds agree lane for lane; only lanes whose
-/// local direction needs rescaling are left undone.
+/// clipping); the AVX and SSE2 builds agree lane for lane; every lane asked
+/// is done (every packet kernel is f64: no direction needs rescaling).
 #[test]
 fn packet_kernels_match_the_scalar_kernels_bit_for_bit() {
     let seed = 8u64;
@@ -88,13 +88,7 @@ fn packet_kernels_match_the_scalar_kernels_bit_for_bit() {
             let ray = Ray::segment(o[k], d[k], tmin, tmax);
             let mut want: Vec<Span> = Vec::new();
             t.spans_in(i, &ray, (tmin, tmax), &mut want);
-            if r.done & (1 << k) == 0 {
-                // Only a lane the scalar path rescales may be left to it.
-                let ld = t.to_local[i as usize].transform_vector3(d[k]);
-                let f64_kind = matches!(t.kind[i as usize], LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder);
-                assert!(!f64_kind && Ray::dir_rescale(ld).is_some(), "leaf {i} lane {k} left undone");
-                continue;
-            }
+            assert!(r.done & (1 << k) != 0, "leaf {i} lane {k} left undone");
             lanes_done += 1;
             let mut got: Vec<Span> = Vec::new();
             if r.hit & (1 << k) != 0 {
@@ -156,13 +150,8 @@ fn packet_kernels_match_the_scalar_kernels_on_edge_cases() {
         }
         for k in 0..8 {
             let ray = Ray::new(o[k], d[k]);
-            let ld = t.to_local[i as usize].transform_vector3(d[k]);
-            // Balls, ellipsoids and cylinders are traced in f64: every lane is done.
-            let f64_kind = matches!(t.kind[i as usize], LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder);
-            assert_eq!(r.done & (1 << k) != 0, f64_kind || Ray::dir_rescale(ld).is_none(), "leaf {i} lane {k} round {round}: done");
-            if r.done & (1 << k) == 0 {
-                continue;
-            }
+            // Every packet kernel is f64: every lane is done.
+            assert!(r.done & (1 << k) != 0, "leaf {i} lane {k} round {round}: done");
             compared += 1;
             let mut want: Vec<Span> = Vec::new();
             t.spans_in(i, &ray, (f32::NEG_INFINITY, f32::INFINITY), &mut want);

@@ -224,6 +224,17 @@ struct Crossing {
     front: bool,
 }
 
+/// What [`MeshData::walk_signed`] needs besides the crossings: the (local)
+/// ray, the range it clips to and the leaf id its surfaces carry.
+#[derive(Clone, Copy)]
+struct Walk {
+    o: Vec3,
+    d: Vec3,
+    tmin: f32,
+    tmax: f32,
+    leaf: u32,
+}
+
 /// Per-ray constants of the watertight test.
 #[derive(Clone, Copy)]
 struct WoopRay {
@@ -1076,7 +1087,7 @@ impl MeshData {
                     // The count at tmin is zero: only the crossings up to tmax matter.
                     self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, (tmin, tmax), leaf, out);
+                    self.walk_signed(&xs, 0, Walk { o, d, tmin, tmax, leaf }, out);
                     return;
                 }
                 // Collect to the box exit: the crossings past tmax tell how deep inside
@@ -1084,7 +1095,7 @@ impl MeshData {
                 self.for_each_crossing(o, d, tmin, f32::INFINITY, |c| xs.push(c));
                 self.sort_signed(&mut xs);
                 let count: i32 = xs.iter().map(|c| -self.sign(c)).sum();
-                self.walk_signed(&xs, count, (tmin, tmax), leaf, out);
+                self.walk_signed(&xs, count, Walk { o, d, tmin, tmax, leaf }, out);
             }
             InsideRule::Winding => {
                 let Some(&root) = self.bvh.nodes.first() else { return };
@@ -1100,7 +1111,10 @@ impl MeshData {
                         Surf::new(leaf, SUB_BOX)
                     }
                 };
-                // Walk the pieces between consecutive crossings.
+                // Walk the pieces between consecutive crossings (decided by
+                // the f32 t; the ends pushed refined as `walk_signed`'s).
+                let w = Walk { o, d, tmin, tmax, leaf };
+                let mut floor = tmin;
                 let mut inside = false;
                 let mut start = (lo, end_surf(lo, tmin));
                 // (start of the current piece, the crossing there if any)
@@ -1114,16 +1128,17 @@ impl MeshData {
                         if now != inside {
                             if now {
                                 start = match prev.1 {
-                                    Some(c) => (prev.0, self.surf(leaf, &c, true)),
+                                    Some(c) => (self.refine(&c, &w, floor), self.surf(leaf, &c, true)),
                                     None => (prev.0, end_surf(prev.0, tmin)),
                                 };
                             } else {
                                 // Never at `lo`: the walk starts outside.
-                                let s1 = match prev.1 {
-                                    Some(c) => self.surf(leaf, &c, false),
-                                    None => Surf::NONE,
+                                let (t1, s1) = match prev.1 {
+                                    Some(c) => (self.refine(&c, &w, start.0), self.surf(leaf, &c, false)),
+                                    None => (prev.0, Surf::NONE),
                                 };
-                                push_clipped(out, Span { t0: start.0, s0: start.1, t1: prev.0, s1 }, tmin, tmax);
+                                push_clipped(out, Span { t0: start.0, s0: start.1, t1, s1 }, tmin, tmax);
+                                floor = t1;
                             }
                             inside = now;
                         }
@@ -1154,25 +1169,64 @@ impl MeshData {
         sort_crossings(xs, |c| self.sign(c) > 0);
     }
 
-    /// Spans of sorted signed crossings, given the winding count at `tmin`,
-    /// clipped to `[tmin, tmax]`.
-    fn walk_signed<S: SpanSink + ?Sized>(&self, xs: &[Crossing], mut count: i32, (tmin, tmax): (f32, f32), leaf: u32, out: &mut S) {
-        let mut start = (tmin, Surf::NONE);
+    /// Spans of sorted signed crossings, given the winding count at
+    /// `w.tmin`, clipped to `[w.tmin, w.tmax]`. The crossings are chosen and
+    /// ordered by their f32 t; the ends pushed are refined in f64
+    /// ([`MeshData::refine`]).
+    fn walk_signed<S: SpanSink + ?Sized>(&self, xs: &[Crossing], mut count: i32, w: Walk, out: &mut S) {
+        let mut start = (w.tmin, Surf::NONE);
+        // The last end pushed: refined ends never go back past it.
+        let mut floor = w.tmin;
         for c in xs {
-            if c.t > tmax {
+            if c.t > w.tmax {
                 break;
             }
             let next = count + self.sign(c);
             if count <= 0 && next > 0 {
-                start = (c.t, self.surf(leaf, c, true));
+                start = (self.refine(c, &w, floor), self.surf(w.leaf, c, true));
             } else if count > 0 && next <= 0 {
-                push_clipped(out, Span { t0: start.0, s0: start.1, t1: c.t, s1: self.surf(leaf, c, false) }, tmin, tmax);
+                let t1 = self.refine(c, &w, start.0);
+                push_clipped(out, Span { t0: start.0, s0: start.1, t1, s1: self.surf(w.leaf, c, false) }, w.tmin, w.tmax);
+                floor = t1;
             }
             count = next;
         }
         if count > 0 {
-            push_clipped(out, Span { t0: start.0, s0: start.1, t1: tmax, s1: Surf::NONE }, tmin, tmax);
+            push_clipped(out, Span { t0: start.0, s0: start.1, t1: w.tmax, s1: Surf::NONE }, w.tmin, w.tmax);
         }
+    }
+
+    /// Crossing `c`'s t refined in f64 from its triangle's plane, `n . (v0 -
+    /// o) / n . d` with the f32 vertices and ray exact in f64, rounded once,
+    /// then clamped to `[lo, w.tmax]` (`lo` at least `w.tmin`, and past `lo`
+    /// where the f32 t was): the f32
+    /// watertight test works relative to the ray's origin, and put an end
+    /// where the ray runs at angle `a` to the face ~1e-8 of the origin's
+    /// distance / sin(a) off (tests/stress_data.rs). The clamp keeps the
+    /// spans sorted, in range, and no entry past the limit a nearest query
+    /// returns; the crossing's f32 t is kept where its plane is parallel to
+    /// the ray.
+    #[inline]
+    fn refine(&self, c: &Crossing, w: &Walk, lo: f32) -> f32 {
+        let [a, b, e] = self.tris[c.slot as usize].map(|v| v.as_dvec3());
+        let (n, dd) = ((b - a).cross(e - a), w.d.as_dvec3());
+        let den = n.dot(dd);
+        let ao = a - w.o.as_dvec3();
+        // No further than the f32 test itself may be off (8 f32 epsilons of
+        // the vertex's distance from the origin, stretched by 1 / sin), nor
+        // than the triangle's size along the ray: where the ray runs so close
+        // to the plane that the test's choice of triangle is itself rounding,
+        // the plane's crossing may lie far off the triangle.
+        let size = (b - a).abs().max((e - a).abs()).max_element();
+        let tol =
+            ((8.0 * f32::EPSILON as f64) * ao.abs().max_element() * n.abs().element_sum() / den.abs()).min(size / dd.abs().max_element());
+        let t = n.dot(ao) / den;
+        // (max / min, not clamp: no panic whatever the bounds.)
+        let t = if t.is_finite() { t.max(c.t as f64 - tol).min(c.t as f64 + tol) as f32 } else { c.t };
+        // Strictly after `lo` where the f32 t was: a span or gap the f32
+        // walk kept keeps a positive length.
+        let lo = if c.t > lo { lo.next_up() } else { lo };
+        t.max(lo.max(w.tmin)).min(w.tmax)
     }
 
     /// [`MeshData::spans`] for a nearest-hit query: only the first entry is sure to
@@ -1244,7 +1298,7 @@ impl MeshData {
                     // Crossings found before `cut` shrank may lie past it: not all
                     // of their neighbours were seen.
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, (tmin, cut.min(tmax)), leaf, out);
+                    self.walk_signed(&xs, 0, Walk { o, d, tmin, tmax: cut.min(tmax), leaf }, out);
                     return cut;
                 }
             }
@@ -1500,7 +1554,7 @@ impl MeshData {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             self.sort_signed(&mut xs[k]);
-            self.walk_signed(&xs[k], 0, (tmin[k], cut[k].min(tmax[k])), leaf, &mut out[k]);
+            self.walk_signed(&xs[k], 0, Walk { o, d: d[k], tmin: tmin[k], tmax: cut[k].min(tmax[k]), leaf }, &mut out[k]);
         }
         (active, cut)
     }

@@ -102,7 +102,8 @@ pub enum LeafKind {
     /// Unit sphere under a map that is not a similarity (an ellipsoid in the
     /// world), traced in local space through its f64 map ([`crate::table64`]).
     Ellipsoid,
-    /// Box `[p0, p1]`.
+    /// Box `[p0, p1]` in its own coordinates (the description's f32
+    /// numbers), traced through its f64 map ([`crate::table64`]).
     Cuboid,
     /// Unit capped cylinder (f64 map, as the ellipsoid).
     Cylinder,
@@ -112,7 +113,9 @@ pub enum LeafKind {
     Cone,
     /// Torus, minor radius (major = 1) in `p0.x` (f64 map, as the ellipsoid).
     Torus,
-    /// Half-space, normal in `p0.xyz`, offset in `p0.w`.
+    /// Half-space, traced against its world plane in f64 (normal, and
+    /// offset relative to the anchor, in its `maps64` entry; see
+    /// [`crate::table64`]); its unit local normal in `p0.xyz` (for shading).
     HalfSpace,
     /// Van Wijk swept sphere (`ext` indexes [`LeafTable::sweeps`]).
     SweptSphere,
@@ -525,9 +528,10 @@ pub struct LeafTable {
     pub gcyls: Vec<Arc<GenCylData>>,
     /// Distinct meshes (a mesh under many transforms is stored once).
     pub meshes: Vec<Arc<MeshData>>,
-    /// Per leaf traced in f64 (tori, ellipsoids, cylinders, cones: see
+    /// Per leaf traced in f64 (tori, ellipsoids, cylinders, cones, boxes: see
     /// [`LeafTable::has_map64`]; indexed by `ext`), its world-to-local map in
-    /// f64: the linear part and the anchor's local point ([`crate::table64`]).
+    /// f64: the linear part and the anchor's local point ([`crate::table64`]);
+    /// per half-space, its f64 world plane relative to the anchor instead.
     pub maps64: Vec<(DMat3, DVec3)>,
     /// Polish tolerance of the torus roots, relative to the minor radius (see
     /// [`kernels::torus_tol`]; a bake sets [`kernels::TORUS_TOLERANCE`] unless
@@ -648,10 +652,10 @@ impl LeafTable {
         let (inv32, b) = Self::inverse32(&m, anchor)?;
         check_range(&m.matrix3, (c.kind != LeafKind::HalfSpace).then_some(&bounds), anchor)?;
         check_own_sizes(shape, &m.matrix3)?;
-        // Boxes and planes take the anchor's local point into their own
-        // parameters, in f64 (a box 1e5 from the origin keeps bounds relative to
-        // its centre, a plane its offset relative to the anchor); the map is
-        // then linear.
+        // Planes take the anchor's local point into their offset, in f64 (a
+        // plane 1e5 from the origin keeps its offset relative to the
+        // anchor); the map is then linear. (The f32 map only carries
+        // normals now: boxes and planes are traced in f64, crate::table64.)
         let (kind, (inv32, p0, p1)) = match c.kind {
             LeafKind::Sphere => match similarity_scale(&m.matrix3) {
                 // The ball's centre and radius in f64, kept as f32 numbers
@@ -664,12 +668,6 @@ impl LeafTable {
                 }
                 None => (LeafKind::Ellipsoid, (inv32, c.p0, c.p1)),
             },
-            LeafKind::Cuboid => {
-                let lo = c.p0.truncate().as_dvec3() - b;
-                let hi = c.p1.truncate().as_dvec3() - b;
-                let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
-                (c.kind, (z, lo.as_vec3().extend(0.0), hi.as_vec3().extend(0.0)))
-            }
             LeafKind::HalfSpace => {
                 // From the description's f32 numbers in f64: the canonical
                 // offset / |normal| rounded in f32 had already lost 3e-3 of a
@@ -692,13 +690,29 @@ impl LeafTable {
         let mut ext = 0;
         if Self::has_map64(kind) {
             // The f64 map (crate::table64): the f32 one (6e-8 relative) moved
-            // a thin tube's surface by a large part of it, and tangent chords'
-            // ends by ~6e-8 r^2 / (L/2).
-            self.maps64.push((m.matrix3.inverse(), b));
+            // a thin tube's surface by a large part of it, tangent chords'
+            // ends by ~6e-8 r^2 / (L/2), and where a ray at angle a to a flat
+            // face crosses it by ~6e-8 of its distance / sin(a).
+            self.maps64.push(Self::map64_of(shape, kind, &m.matrix3.inverse(), b));
             ext = self.maps64.len() - 1;
         }
         self.ext.push(ext as u32);
         Ok(i)
+    }
+
+    /// The [`LeafTable::maps64`] entry of a leaf of `kind`: its f64
+    /// world-to-local map `inv` and the anchor's local point `b`; for a
+    /// half-space its world plane relative to the anchor instead (see
+    /// [`LeafTable::plane64`]): `dot(n, x) <= offset` with
+    /// `x = inv (p - anchor) + b` is `dot(inv^T n, p - anchor) <= offset - dot(n, b)`.
+    fn map64_of(shape: &LeafShape, kind: LeafKind, inv: &DMat3, b: DVec3) -> (DMat3, DVec3) {
+        match shape {
+            LeafShape::HalfSpace(h) if kind == LeafKind::HalfSpace => {
+                let n = h.normal.as_dvec3();
+                (DMat3::from_cols(inv.transpose() * n, DVec3::ZERO, DVec3::ZERO), DVec3::new(h.offset as f64 - n.dot(b), 0.0, 0.0))
+            }
+            _ => (*inv, b),
+        }
     }
 
     /// Pushes the spans of leaf `i` along the (world) ray, clipped to its range,
@@ -724,6 +738,7 @@ impl LeafTable {
                 return;
             }
             LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone => return self.quadric_spans(i, ray, (tmin, tmax), out),
+            LeafKind::Cuboid | LeafKind::HalfSpace => return self.flat_spans(i, ray, (tmin, tmax), out),
             _ => {}
         }
         let m = &self.to_local[iu];
@@ -790,27 +805,12 @@ impl LeafTable {
     #[inline(always)]
     fn spans_local<S: SpanSink + ?Sized>(&self, i: u32, (lo, ld): (Vec3, Vec3), (tmin, tmax): (f32, f32), out: &mut S) {
         let iu = i as usize;
-        let r = match self.kind[iu] {
-            LeafKind::Cuboid => kernels::cuboid(lo, ld, self.p0[iu].truncate(), self.p1[iu].truncate()),
-            LeafKind::HalfSpace => kernels::half_space(lo, ld, self.p0[iu].truncate(), self.p0[iu].w),
-            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus => {
-                unreachable!("traced in f64 (ball_spans, quadric_spans, torus_spans)")
-            }
-            LeafKind::SweptSphere => {
-                self.sweeps[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
-                return;
-            }
-            LeafKind::GenCylinder => {
-                self.gcyls[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
-                return;
-            }
-            LeafKind::Mesh => {
-                self.meshes[self.ext[iu] as usize].spans(&Ray::segment(lo, ld, tmin, tmax), i, out);
-                return;
-            }
-        };
-        if let Some((t0, s0, t1, s1)) = r {
-            push_clipped(out, Span { t0, s0: Surf::new(i, s0), t1, s1: Surf::new(i, s1) }, tmin, tmax);
+        let local = Ray::segment(lo, ld, tmin, tmax);
+        match self.kind[iu] {
+            LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].spans(&local, i, out),
+            LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].spans(&local, i, out),
+            LeafKind::Mesh => self.meshes[self.ext[iu] as usize].spans(&local, i, out),
+            _ => unreachable!("traced in f64 (ball_spans, quadric_spans, torus_spans, flat_spans)"),
         }
     }
 
@@ -858,35 +858,29 @@ impl LeafTable {
 
     /// Appends the world planes of leaf `i` when it is a polytope (a half-space:
     /// one plane; a box under any affine map: six) and says whether it is one.
-    /// For bounds at bake: the planes come from the f32 world-to-local map.
+    /// For bounds at bake: the planes come from the f64 maps the spans use.
     pub fn world_planes(&self, i: u32, out: &mut Vec<crate::polytope::Plane>) -> bool {
         use crate::polytope::Plane;
         let iu = i as usize;
-        let m = &self.to_local[iu];
-        let a = glam::DMat3::from_cols(m.matrix3.x_axis.as_dvec3(), m.matrix3.y_axis.as_dvec3(), m.matrix3.z_axis.as_dvec3());
-        let b = m.translation.as_dvec3();
         let c = Vec3::from(self.anchor[iu]).as_dvec3();
-        // Local plane dot(nl, x) <= w with x = A (p - c) + b:
-        // dot(A^T nl, p) <= w - dot(nl, b) + dot(A^T nl, c).
-        let mut push = |nl: DVec3, w: f64| {
-            let n = a.transpose() * nl;
-            if let Some(p) = Plane::new(n, w - nl.dot(b) + n.dot(c)) {
-                out.push(p);
-            }
-        };
         match self.kind[iu] {
             LeafKind::HalfSpace => {
-                let p0 = self.p0[iu];
-                push(p0.truncate().as_dvec3(), p0.w as f64);
+                let (n, w) = self.plane64(iu);
+                out.extend(Plane::new(n, w + n.dot(c)));
                 true
             }
             LeafKind::Cuboid => {
+                let (a, b) = &self.maps64[self.ext[iu] as usize];
                 let (lo, hi) = (self.p0[iu].truncate().as_dvec3(), self.p1[iu].truncate().as_dvec3());
+                // Local plane dot(nl, x) <= w with x = A (p - c) + b:
+                // dot(A^T nl, p) <= w - dot(nl, b) + dot(A^T nl, c).
+                let mut push = |nl: DVec3, w: f64| {
+                    let n = a.transpose() * nl;
+                    out.extend(Plane::new(n, w - nl.dot(*b) + n.dot(c)));
+                };
                 for k in 0..3 {
-                    let mut e = DVec3::ZERO;
-                    e[k] = 1.0;
-                    push(e, hi[k]);
-                    push(-e, -lo[k]);
+                    push(DVec3::AXES[k], hi[k]);
+                    push(-DVec3::AXES[k], -lo[k]);
                 }
                 true
             }
@@ -896,19 +890,16 @@ impl LeafTable {
 
     /// Moves the anchor of half-space leaf `i` to the point of its plane
     /// nearest `near` (the centre of its object's bounds, at bake): the
-    /// plane's offset is kept relative to a point near where it matters,
-    /// computed in f64 from the stored map. Other kinds keep their anchor.
+    /// plane's offset is kept relative to a point near where it matters
+    /// (in f64, from its f64 plane). Other kinds keep their anchor.
     pub fn reanchor(&mut self, i: u32, near: Vec3) {
         let iu = i as usize;
         if self.kind[iu] != LeafKind::HalfSpace || !near.is_finite() {
             return;
         }
-        let m = &self.to_local[iu];
-        let a = glam::DMat3::from_cols(m.matrix3.x_axis.as_dvec3(), m.matrix3.y_axis.as_dvec3(), m.matrix3.z_axis.as_dvec3());
-        let (nl, w) = (self.p0[iu].truncate().as_dvec3(), self.p0[iu].w as f64);
+        let (n, w) = self.plane64(iu);
         let c = Vec3::from(self.anchor[iu]).as_dvec3();
-        // World plane: dot(n, p - c) <= w with n = A^T nl.
-        let n = a.transpose() * nl;
+        // World plane: dot(n, p - c) <= w.
         let nn = n.length_squared();
         if !(nn > 0.0 && nn.is_finite()) {
             return;
@@ -918,7 +909,8 @@ impl LeafTable {
         if !c2.is_finite() {
             return;
         }
-        self.p0[iu].w = (w - n.dot(c2.as_dvec3() - c)) as f32;
+        // c2 - c is exact in f64 (two f32 points).
+        self.maps64[self.ext[iu] as usize].1.x = w - n.dot(c2.as_dvec3() - c);
         self.anchor[iu] = c2.into();
     }
 
@@ -959,14 +951,20 @@ impl LeafTable {
         if matches!(self.kind[iu], LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone) {
             return self.quadric_contains(iu, p);
         }
+        if matches!(self.kind[iu], LeafKind::Cuboid | LeafKind::HalfSpace) {
+            return self.flat_contains(iu, p);
+        }
         let l = self.local_point(iu, p);
-        let p0 = self.p0[iu];
         match self.kind[iu] {
-            LeafKind::Cuboid => l.cmpge(p0.truncate()).all() && l.cmple(self.p1[iu].truncate()).all(),
-            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus => {
-                unreachable!("classified in f64 (ball_frame, local64)")
+            LeafKind::Sphere
+            | LeafKind::Ellipsoid
+            | LeafKind::Cylinder
+            | LeafKind::Cone
+            | LeafKind::Torus
+            | LeafKind::Cuboid
+            | LeafKind::HalfSpace => {
+                unreachable!("classified in f64 (ball_frame, local64, flat_contains)")
             }
-            LeafKind::HalfSpace => p0.truncate().dot(l) <= p0.w,
             LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].contains(l),
             LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].contains(l),
             LeafKind::Mesh => self.meshes[self.ext[iu] as usize].contains(l),

@@ -1,5 +1,6 @@
 //! The leaves traced through an f64 world-to-local map: ellipsoids (a sphere
-//! under a map that is not a similarity), cylinders, cones and tori.
+//! under a map that is not a similarity), cylinders, cones, tori and boxes;
+//! and half-spaces, traced against their world plane in f64.
 //!
 //! Why f64: through the f32 map (each entry rounded, 6e-8 relative) the local
 //! line is off by ~6e-8 of its distance from the leaf, which moves the ends
@@ -8,7 +9,10 @@
 //! up to ~3e-4 of the view exists, and moves where a ray along a cap's plane
 //! crosses it anywhere along the cap (tests/stress_tangent.rs: 0.16-0.26 of
 //! the view). In f64 the answer is that of the f32 inputs, rounded once to
-//! f32 t, and the f64 ranges need no rescaling of the direction.
+//! f32 t, and the f64 ranges need no rescaling of the direction. The same
+//! map moved where a ray at a small angle `a` to a box's face or a plane
+//! crosses it by ~6e-8 of its distance / sin(a): up to the whole view for
+//! rays along a face (tests/stress_grazing.rs).
 //!
 //! Spans, point classification and normals all read the same f64 local
 //! point, so that they agree.
@@ -34,7 +38,51 @@ impl LeafTable {
     /// Does leaf kind `k` keep an f64 map in [`LeafTable::maps64`]?
     #[inline(always)]
     pub fn has_map64(k: LeafKind) -> bool {
-        matches!(k, LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus)
+        matches!(k, LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus | LeafKind::Cuboid | LeafKind::HalfSpace)
+    }
+
+    /// Half-space `iu`'s world plane in f64, `dot(n, p - anchor) <= w`,
+    /// kept in its [`LeafTable::maps64`] entry (the normal as the first
+    /// column, the offset as the point's x): a plane needs no map.
+    #[inline(always)]
+    pub(crate) fn plane64(&self, iu: usize) -> (DVec3, f64) {
+        let (m, b) = &self.maps64[self.ext[iu] as usize];
+        (m.x_axis, b.x)
+    }
+
+    /// `p` relative to leaf `iu`'s anchor, in f64 (exact).
+    #[inline(always)]
+    pub(crate) fn rel64(&self, iu: usize, p: Vec3) -> DVec3 {
+        p.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()
+    }
+
+    /// The spans of a box (its local line through the f64 map, its own f32
+    /// bounds) or a half-space (its f64 world plane) along the world ray.
+    #[inline(always)]
+    pub(crate) fn flat_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {
+        let iu = i as usize;
+        let r = if self.kind[iu] == LeafKind::Cuboid {
+            let (lo, ld) = self.line64(iu, ray);
+            kernels::cuboid64(lo, ld, self.p0[iu].truncate().as_dvec3(), self.p1[iu].truncate().as_dvec3())
+        } else {
+            let (n, w) = self.plane64(iu);
+            kernels::half_space64(self.rel64(iu, ray.origin), ray.dir.as_dvec3(), n, w)
+        };
+        if let Some(r) = r {
+            let (t0, s0, t1, s1) = kernels::narrow(r);
+            push_clipped(out, Span { t0, s0: Surf::new(i, s0), t1, s1: Surf::new(i, s1) }, tmin, tmax);
+        }
+    }
+
+    /// Is world point `p` inside box or half-space `iu` (boundary included)?
+    #[inline]
+    pub(crate) fn flat_contains(&self, iu: usize, p: Vec3) -> bool {
+        if self.kind[iu] == LeafKind::Cuboid {
+            let l = self.local64(iu, p);
+            return l.cmpge(self.p0[iu].truncate().as_dvec3()).all() && l.cmple(self.p1[iu].truncate().as_dvec3()).all();
+        }
+        let (n, w) = self.plane64(iu);
+        kernels::dot64(n, self.rel64(iu, p)) <= w
     }
 
     /// Cone `iu`'s radii at z = 0 and z = 1 (relative to the larger), in f64.
