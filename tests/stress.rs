@@ -270,6 +270,16 @@ fn tangent_balls(c: DVec3, s: f64) -> Vec<(&'static str, Shape, DVec3, f64)> {
     vec![("sphere", plain, c, r32(0.8 * s)), ("rotated, scaled sphere", xf, m.transform_point3(lc), lr * sc)]
 }
 
+/// Where the tangent and grazing tests put their solids: `(label, centre,
+/// size)` at offsets 0 to 1e5 along one direction, and at sizes 1e-6 to 1e6
+/// at the origin.
+pub fn tangent_places() -> Vec<(String, DVec3, f64)> {
+    let dir0 = DVec3::new(0.6, -0.48, 0.64);
+    let mut cases: Vec<(String, DVec3, f64)> = [0.0, 1e3, 1e4, 1e5].iter().map(|&o| (format!("offset {o:e}"), dir0 * o, 1.0)).collect();
+    cases.extend([1e-6, 1e-3, 1e3, 1e6].iter().map(|&s| (format!("scale {s:e}"), DVec3::ZERO, s)));
+    cases
+}
+
 /// Rays tangent to balls, far from the origin and at every scale: the f32
 /// ray from 4 sizes away, aimed at a point of the surface along a tangent
 /// (the f32 rounding of the ray leaves a chord of 0 to ~3e-4 of the view,
@@ -282,9 +292,7 @@ fn tangent_balls(c: DVec3, s: f64) -> Vec<(&'static str, Shape, DVec3, f64)> {
 fn tangent_chords() {
     let seed = 0x7a49_e175u64;
     println!("seed {seed:#x}");
-    let dir0 = DVec3::new(0.6, -0.48, 0.64);
-    let mut cases: Vec<(String, DVec3, f64)> = [0.0, 1e3, 1e4, 1e5].iter().map(|&o| (format!("offset {o:e}"), dir0 * o, 1.0)).collect();
-    cases.extend([1e-6, 1e-3, 1e3, 1e6].iter().map(|&s| (format!("scale {s:e}"), DVec3::ZERO, s)));
+    let cases = tangent_places();
     let mut bad = vec![];
     println!("| ball | where | wrong counts (chords >= 1e-6 view) | max end error / view | chords 1e-6..1e-5 / 1e-5..1e-4 / 1e-4.. of the view |");
     for (ci, (label, c, s)) in cases.iter().enumerate() {

@@ -14,7 +14,7 @@ use rand::{rngs::SmallRng, Rng};
 
 use crate::oracle::*;
 use crate::oracle::{octa_mesh, remove_mesh_files};
-use crate::stress::{r32, rv};
+use crate::stress::{r32, rv, tangent_places};
 use crate::stress_tangent::{across, tally, Aim, Family};
 
 /// `dir` tilted towards unit `n` by an angle of 1e-7..1e-2 rad (either
@@ -175,9 +175,7 @@ fn mesh_exempt(name: &str, label: &str) -> bool {
 fn grazing_flats() {
     let seed = 0x6f1a_7b33u64;
     println!("seed {seed:#x}");
-    let dir0 = DVec3::new(0.6, -0.48, 0.64);
-    let mut cases: Vec<(String, DVec3, f64)> = [0.0, 1e3, 1e4, 1e5].iter().map(|&o| (format!("offset {o:e}"), dir0 * o, 1.0)).collect();
-    cases.extend([1e-6, 1e-3, 1e3, 1e6].iter().map(|&s| (format!("scale {s:e}"), DVec3::ZERO, s)));
+    let cases = tangent_places();
     let mut bad = vec![];
     println!("| surface | where | wrong counts, chords >= 1e-6 / 1e-4 of the view | max end error / view | chords 1e-6..1e-5 / 1e-5..1e-4 / 1e-4.. of the view | in a face's plane (set aside) |");
     println!("|---|---|---|---|---|---|");

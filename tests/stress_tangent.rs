@@ -13,7 +13,7 @@ use rand::{rngs::SmallRng, Rng, SeedableRng};
 use rothray::primitives::Span;
 
 use crate::oracle::*;
-use crate::stress::{model_crossings, r32, robust, rv, wrong_count};
+use crate::stress::{model_crossings, r32, robust, rv, tangent_places, wrong_count};
 
 /// A point of a surface and a direction tangent to it there.
 pub(crate) type Aim = (DVec3, DVec3);
@@ -256,9 +256,7 @@ pub(crate) fn tally(fam: &Family, s: f64, seed: u64) -> Tally {
 fn tangent_quadrics() {
     let seed = 0x7a49_e176u64;
     println!("seed {seed:#x}");
-    let dir0 = DVec3::new(0.6, -0.48, 0.64);
-    let mut cases: Vec<(String, DVec3, f64)> = [0.0, 1e3, 1e4, 1e5].iter().map(|&o| (format!("offset {o:e}"), dir0 * o, 1.0)).collect();
-    cases.extend([1e-6, 1e-3, 1e3, 1e6].iter().map(|&s| (format!("scale {s:e}"), DVec3::ZERO, s)));
+    let cases = tangent_places();
     let mut bad = vec![];
     println!("| surface | where | wrong counts, chords >= 1e-6 / 1e-4 of the view | max end error / view | chords 1e-6..1e-5 / 1e-5..1e-4 / 1e-4.. of the view | in a cap's plane (set aside) |");
     println!("|---|---|---|---|---|---|");
