@@ -1326,7 +1326,7 @@ mod tests {
             let (o, d) = ((c - v * 3.0).as_vec3(), v.as_vec3());
             let mut got: Vec<Span> = vec![];
             g.spans(&Ray::segment(o, d, -1e9, 1e9), 0, &mut got);
-            match kernels::cuboid(o, d, mn, mx) {
+            match kernels::cuboid64(o.as_dvec3(), d.as_dvec3(), mn.as_dvec3(), mx.as_dvec3()).map(kernels::narrow) {
                 Some((t0, _, t1, _)) if (t1 - t0) as f64 * v.length() > 1e-4 * size => {
                     hits += 1;
                     assert_eq!(got.len(), 1, "{got:?} vs {t0} {t1}");
@@ -1341,7 +1341,7 @@ mod tests {
                 None => assert!(got.is_empty(), "{got:?}"),
             }
         }
-        println!("straight rectangle vs kernels::cuboid: {hits} hits, max span end error {max_err:e} (relative to size)");
+        println!("straight rectangle vs kernels::cuboid64: {hits} hits, max span end error {max_err:e} (relative to size)");
         assert!(max_err < 5e-6);
     }
 

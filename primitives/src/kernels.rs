@@ -84,41 +84,8 @@ pub fn ball(o: DVec3, d: DVec3, r: f64) -> Option<(f64, f64)> {
     Some(if t0 <= t1 { (t0, t1) } else { (t1, t0) })
 }
 
-/// Axis-aligned box `[mn, mx]`; sub = axis * 2 + (1 for the max face).
-#[inline(always)]
-pub fn cuboid(o: Vec3, d: Vec3, mn: Vec3, mx: Vec3) -> Option<Range> {
-    let inv = d.recip();
-    let mut t_in = f32::NEG_INFINITY;
-    let mut t_out = f32::INFINITY;
-    let mut s_in = 0;
-    let mut s_out = 0;
-    for a in 0..3 {
-        if d[a] == 0.0 {
-            if o[a] < mn[a] || o[a] > mx[a] {
-                return None;
-            }
-            continue;
-        }
-        let ta = (mn[a] - o[a]) * inv[a];
-        let tb = (mx[a] - o[a]) * inv[a];
-        let (tn, sn, tf, sf) = if ta <= tb { (ta, a as u32 * 2, tb, a as u32 * 2 + 1) } else { (tb, a as u32 * 2 + 1, ta, a as u32 * 2) };
-        if tn > t_in {
-            t_in = tn;
-            s_in = sn;
-        }
-        if tf < t_out {
-            t_out = tf;
-            s_out = sf;
-        }
-    }
-    if t_in <= t_out {
-        Some((t_in, s_in, t_out, s_out))
-    } else {
-        None
-    }
-}
-
-/// [`cuboid`] in f64, on the local line of a box traced through its f64 map
+/// Axis-aligned box `[mn, mx]` (sub = axis * 2 + 1 for the max face), in
+/// f64, on the local line of a box traced through its f64 map
 /// ([`crate::table64`]); the packet kernel (`kernels8`) repeats its
 /// operations lane by lane.
 #[inline(always)]
