@@ -15,7 +15,7 @@
 //! ([`crate::table64`]); every lane is done (f64
 //! needs no rescaling). The cone and the other kinds have no packet kernel.
 
-use glam::{DMat3, Vec3};
+use glam::{DMat3, DVec3, Vec3};
 
 use crate::kernels::sub;
 use crate::simd8::D8;
@@ -150,6 +150,20 @@ fn cylinder<D: D8>(o: &[D; 3], d: &[D; 3]) -> R8<D> {
     and_slab01(o[2], d[2], side)
 }
 
+/// The lanes' origins relative to point `c` (exact in f64) and their
+/// directions, in f64.
+#[inline(always)]
+fn rel_lines<D: D8>(rays: &Rays8Soa, c: DVec3) -> ([D; 3], [D; 3]) {
+    let o = [D::widen(&rays.o[0]).sub(D::splat(c.x)), D::widen(&rays.o[1]).sub(D::splat(c.y)), D::widen(&rays.o[2]).sub(D::splat(c.z))];
+    (o, [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])])
+}
+
+/// A kernel's answer for the lanes `lanes`, every one of them done.
+#[inline(always)]
+fn record<D: D8>(r: R8<D>, lanes: u32) -> Ranges8 {
+    Ranges8 { done: lanes, hit: r.hit.bitmask() & lanes, t0: r.t0.narrow(), s0: r.s0.store_u32(), t1: r.t1.narrow(), s1: r.s1.store_u32() }
+}
+
 /// A kernel's answer in lanes: where the line meets the solid, and the range.
 #[derive(Clone, Copy)]
 struct R8<V> {
@@ -278,17 +292,9 @@ impl LeafTable {
     fn planes8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let (n, w) = self.plane64(iu);
         let c = Vec3::from(self.anchor[iu]).as_dvec3();
-        let q = [D::widen(&rays.o[0]).sub(D::splat(c.x)), D::widen(&rays.o[1]).sub(D::splat(c.y)), D::widen(&rays.o[2]).sub(D::splat(c.z))];
-        let d = [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])];
+        let (q, d) = rel_lines::<D>(rays, c);
         let r = half_space(&q, &d, [n.x, n.y, n.z], w);
-        *out = Ranges8 {
-            done: lanes,
-            hit: r.hit.bitmask() & lanes,
-            t0: r.t0.narrow(),
-            s0: r.s0.store_u32(),
-            t1: r.t1.narrow(),
-            s1: r.s1.store_u32(),
-        };
+        *out = record(r, lanes);
     }
 
     /// [`LeafTable::ranges8`] of an ellipsoid, a cylinder or a box, as the
@@ -301,8 +307,7 @@ impl LeafTable {
     fn quadrics8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let (m, b) = &self.maps64[self.ext[iu] as usize];
         let c = Vec3::from(self.anchor[iu]).as_dvec3();
-        let o = [D::widen(&rays.o[0]).sub(D::splat(c.x)), D::widen(&rays.o[1]).sub(D::splat(c.y)), D::widen(&rays.o[2]).sub(D::splat(c.z))];
-        let d = [D::widen(&rays.d[0]), D::widen(&rays.d[1]), D::widen(&rays.d[2])];
+        let (o, d) = rel_lines::<D>(rays, c);
         let lo = [map_row(m, 0, &o).add(D::splat(b.x)), map_row(m, 1, &o).add(D::splat(b.y)), map_row(m, 2, &o).add(D::splat(b.z))];
         let ld = [map_row(m, 0, &d), map_row(m, 1, &d), map_row(m, 2, &d)];
         let r = if self.kind[iu] == LeafKind::Cylinder {
@@ -315,14 +320,7 @@ impl LeafTable {
             let side = D::splat(sub::SIDE as f64);
             R8 { hit, t0, s0: side, t1, s1: side }
         };
-        *out = Ranges8 {
-            done: lanes,
-            hit: r.hit.bitmask() & lanes,
-            t0: r.t0.narrow(),
-            s0: r.s0.store_u32(),
-            t1: r.t1.narrow(),
-            s1: r.s1.store_u32(),
-        };
+        *out = record(r, lanes);
     }
 
     /// [`LeafTable::ranges8`] of a ball (`LeafKind::Sphere`), as the scalar
