@@ -281,8 +281,7 @@ pub(crate) fn set_packet_paths(scene: &mut RenderScene, mut pm: Vec<u32>) {
     scene.packet_meshes = pm;
 }
 
-/// [`packet_cover`] by a walk of every object's tree (the tests' oracle).
-#[cfg(test)]
+/// [`packet_cover`] by a walk of every object's tree (also the tests' oracle).
 pub(crate) fn packet_cover_by_walk(scene: &RenderScene, pm: &[u32]) -> Option<Vec<u32>> {
     scene
         .objects
@@ -302,15 +301,7 @@ fn packet_cover(scene: &RenderScene, pm: &[u32]) -> Option<Vec<u32>> {
     if scene.objects.len() > pm.len() {
         return None;
     }
-    scene
-        .objects
-        .iter()
-        .map(|o| {
-            let mut c = Vec::new();
-            containing_leaves(&scene.program, o.root, &mut c);
-            c.into_iter().find(|l| pm.contains(l))
-        })
-        .collect()
+    packet_cover_by_walk(scene, pm)
 }
 
 impl RenderScene {
