@@ -565,6 +565,8 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "leaves_kept_per_tile": per(t.spec.leaves_kept, t.tiles),
         "wide_queries_per_tile": per(t.spec.wide_queries, t.tiles),
         "tile_nodes_written": t.spec.nodes_written,
+        "tile_lists": t.spec.lists,
+        "tile_listed_per_list": t.spec.listed as f64 / t.spec.lists.max(1) as f64,
         "leaves_asked_per_ray": per(st.eval.leaves, rays),
         "wide_children_visited": st.eval.wide_children,
         "early_outs": st.eval.early_outs,

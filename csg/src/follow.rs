@@ -61,6 +61,7 @@ impl Follower {
         p.leafy.truncate(n);
         p.children.truncate(self.children);
         p.local_len = 0;
+        p.lists_len = 0;
     }
 }
 
@@ -106,7 +107,23 @@ fn append_rows(copy: &mut Program, base: &Program) {
 /// copy is not followed.
 fn copy_all(copy: &mut Program, base: &Program) {
     // Named field by field, so that a new field is not forgotten here.
-    let Program { kind, first, count, wide, bounds, leafy, children, wides, local_wides: _, local_len: _, id, edits: _ } = base;
+    let Program {
+        kind,
+        first,
+        count,
+        wide,
+        bounds,
+        leafy,
+        children,
+        wides,
+        local_wides: _,
+        local_len: _,
+        lists: _,
+        lists_len: _,
+        ray_plane: _,
+        id,
+        edits: _,
+    } = base;
     copy.kind.clone_from(kind);
     copy.first.clone_from(first);
     copy.count.clone_from(count);
@@ -116,5 +133,6 @@ fn copy_all(copy: &mut Program, base: &Program) {
     copy.children.clone_from(children);
     copy.wides.clone_from(wides);
     copy.local_len = 0;
+    copy.lists_len = 0;
     copy.id = *id;
 }

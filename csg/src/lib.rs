@@ -23,6 +23,7 @@ pub mod program;
 pub mod spans;
 pub mod spans8;
 pub mod tile;
+pub mod tile_list;
 
 pub use counts::{take_eval_counts, EvalCounts};
 pub use edits::{Edit, EditLog};

@@ -17,6 +17,8 @@ use rothray_primitives::{
 use crate::counts;
 use crate::edits::{Edit, EditLog};
 use crate::spans::{combine_into, Op, SpanList};
+use crate::tile_list::TileList;
+use rothray_primitives::ray_plane::RayPlane;
 
 /// Nodes with more children than this get a BVH over their children.
 pub const WIDE_THRESHOLD: usize = 6;
@@ -85,6 +87,13 @@ pub struct Program {
     pub local_wides: Vec<Wide>,
     /// How many of `local_wides` are in use.
     pub local_len: usize,
+    /// A tile's lists of the children of wide unions it keeps whole (see
+    /// [`crate::tile_list`]); the first `lists_len` are in use.
+    pub lists: Vec<TileList>,
+    /// How many of `lists` are in use.
+    pub lists_len: usize,
+    /// The plane of the tile's rays, which the lists' shadows lie on.
+    pub ray_plane: Option<RayPlane>,
     /// Tells bakes apart (per-tile copies follow the program they copy).
     pub id: u64,
     /// The rows rewritten in place since the bake (see [`Program::record_edit`]).
@@ -610,6 +619,13 @@ impl Program {
     pub fn record_edit(&mut self, e: Edit) {
         let size = self.kind.len() + self.children.len() + self.wides.len();
         self.edits.record(e, size);
+    }
+
+    /// The tile's list of wide union `n`'s children, if it made one.
+    #[inline]
+    pub(crate) fn list_of(&self, n: u32) -> Option<(&TileList, &RayPlane)> {
+        let l = self.lists[..self.lists_len].iter().find(|l| l.node == n)?;
+        Some((l, self.ray_plane.as_ref()?))
     }
 
     /// The BVH of wide node `n`.

@@ -22,6 +22,7 @@ use rothray_primitives::bvh::BvhNode;
 
 use crate::follow::{FollowCounts, Follower};
 use crate::program::{NodeKind, Program, Wide};
+use crate::tile_list::TileList;
 
 /// Below this depth nodes are kept as baked (the specialisation recurses).
 const MAX_DEPTH: u32 = 64;
@@ -38,6 +39,11 @@ const SHORT_LIST: usize = 16;
 /// a narrow union asks every operand's kernel.)
 const NARROW_UNION: usize = crate::program::WIDE_THRESHOLD;
 
+/// A packet union (`Program::is_packet_union`) whose children the tile meets
+/// more than [`NARROW_UNION`] and at most this many of gets a list of them
+/// ([`crate::tile_list`]); with more, its packets walk its tree.
+const LIST_MAX: usize = 128;
+
 /// What the specialisation of one tile did (summed over its objects).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TileCounts {
@@ -50,6 +56,10 @@ pub struct TileCounts {
     pub wide_queries: u64,
     /// Nodes written (specialised copies).
     pub nodes_written: u64,
+    /// Lists of wide unions' children made ([`crate::tile_list`]).
+    pub lists: u64,
+    /// Children those lists hold.
+    pub listed: u64,
 }
 
 /// A per-thread copy of a baked program with the nodes of the current tile
@@ -103,6 +113,8 @@ impl TileProgram {
     /// [`TileProgram::prog`] (`root` itself when nothing changed).
     pub fn specialise(&mut self, base: &Program, leaves: &LeafTable, root: u32, region: &Frustum) -> Option<u32> {
         debug_assert_eq!(self.prog.id, base.id, "begin() first");
+        // (The same for every object of the tile: a few flops.)
+        self.prog.ray_plane = region.ray_plane();
         let mut s = Spec { base, leaves, region, tp: self };
         s.node(root, 0)
     }
@@ -202,15 +214,24 @@ impl Spec<'_> {
                 self.tp.kids.push(p);
             }
         }
+        // A packet union the tile meets many children of gets a list of
+        // them (up to LIST_MAX), so count that far.
+        let listing = kind == NodeKind::Union && self.tp.prog.ray_plane.is_some() && b.is_packet_union(n);
+        let unbounded = self.tp.kids.len() - at;
         {
             let region = self.region;
             let children = &b.children[first..];
             let bounds = &b.bounds;
             let kids = std::cell::RefCell::new(&mut self.tp.kids);
-            let most = if kind == NodeKind::Difference { SHORT_LIST } else { NARROW_UNION };
+            let most = match kind {
+                NodeKind::Difference => SHORT_LIST,
+                _ if listing => LIST_MAX,
+                _ => NARROW_UNION,
+            };
             let limit = at + most + 1;
-            w.packet.cull(
-                |bx| kids.borrow().len() < limit && region.touches_box(bx),
+            w.packet.cull_region(
+                region,
+                || kids.borrow().len() < limit,
                 |pos| {
                     let mut k = kids.borrow_mut();
                     if k.len() < limit && region.touches_box(&bounds[children[pos as usize] as usize]) {
@@ -238,6 +259,12 @@ impl Spec<'_> {
                     self.tp.kids.truncate(at);
                     return Some(n);
                 }
+                if met > NARROW_UNION {
+                    // (Only when `listing`: else `many`.)
+                    self.write_list(n, at + unbounded);
+                    self.tp.kids.truncate(at);
+                    return Some(n);
+                }
                 // A narrow union of the children met, in the tree's order
                 // (a union's result does not depend on the order it combines
                 // its operands in: see `combine`).
@@ -258,6 +285,27 @@ impl Spec<'_> {
                 out
             }
         }
+    }
+
+    /// The tile's list of wide union `n`'s bounded children at the
+    /// positions `kids[from..]` (see [`crate::tile_list`]).
+    fn write_list(&mut self, n: u32, from: usize) {
+        let b = self.base;
+        let first = b.first[n as usize] as usize;
+        let tp = &mut *self.tp;
+        let p = &mut tp.prog;
+        let Some(plane) = p.ray_plane else { return };
+        if p.lists_len == p.lists.len() {
+            p.lists.push(TileList::default());
+        }
+        let l = &mut p.lists[p.lists_len];
+        l.reset(n);
+        for &pos in &tp.kids[from..] {
+            l.push(&plane, pos, &b.bounds[b.children[first + pos as usize] as usize]);
+        }
+        p.lists_len += 1;
+        tp.counts.lists += 1;
+        tp.counts.listed += l.len() as u64;
     }
 
     /// A difference of `positive` minus the subtrahends of baked node `like`

@@ -15,7 +15,7 @@
 
 use glam::Vec4;
 use rothray_primitives::{
-    box_wide::{forms_packet, Lanes8, Rays8, Visit8},
+    box_wide::{forms_packet, BoxWide, Lanes8, Rays8, Visit8},
     LeafTable, Ray,
 };
 
@@ -137,7 +137,14 @@ impl UnionRecords {
             }
         }
         let mut thi = tmax;
-        w.packet.walk8(&Rays8 { o: &o, d: &d, tmin: &tmin }, lanes, &mut thi, &mut walk);
+        let rays = Rays8 { o: &o, d: &d, tmin: &tmin };
+        // The tile's list when it made one and the lanes' rays are its own
+        // (it lists every child whose box they can meet), else the tree.
+        let listed = prog.list_of(n).and_then(|(l, plane)| l.for_rays(plane, (&o, &d), lanes));
+        match listed {
+            Some(ids) => BoxWide::visit_listed(&rays, lanes, &mut thi, ids, &mut walk),
+            None => w.packet.walk8(&rays, lanes, &mut thi, &mut walk),
+        };
         let valid = walk.st.map(|s| s.valid);
         if self.recs.len() == self.len {
             self.recs.push(MemoLeaf::default());

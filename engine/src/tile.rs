@@ -61,6 +61,8 @@ impl TileStats {
         self.spec.leaves_kept += o.spec.leaves_kept;
         self.spec.wide_queries += o.spec.wide_queries;
         self.spec.nodes_written += o.spec.nodes_written;
+        self.spec.lists += o.spec.lists;
+        self.spec.listed += o.spec.listed;
     }
 }
 

@@ -11,6 +11,7 @@ use smallvec::SmallVec;
 
 use crate::aabb::Aabb;
 use crate::bvh::BvhNode;
+use crate::frustum::Frustum;
 use crate::mesh::wide::{collapse, order4, Node4, Packet8, F8, LEAF};
 use crate::mesh::SLAB_EPS;
 
@@ -183,6 +184,36 @@ impl BoxWide {
         }
     }
 
+    /// [`BoxWide::cull`] with `region`'s box test ([`Frustum::touches_box`],
+    /// four slots at a time), while `more()` says to go on.
+    pub fn cull_region(&self, region: &Frustum, mut more: impl FnMut() -> bool, mut f: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
+        stack.push(0);
+        while let Some(ni) = stack.pop() {
+            if !more() {
+                return;
+            }
+            let n = &self.nodes[ni as usize];
+            let mut m = region.touches_slots(n.rows());
+            while m != 0 {
+                let s = m.trailing_zeros();
+                m &= m - 1;
+                let c = n.child(s);
+                if c & LEAF != 0 {
+                    let (first, count) = self.leaves[(c & !LEAF) as usize];
+                    for &id in &self.ids[first as usize..(first + count) as usize] {
+                        f(id);
+                    }
+                } else {
+                    stack.push(c);
+                }
+            }
+        }
+    }
+
     /// Heap bytes held (capacity of the node, leaf and id arrays).
     pub fn heap_bytes(&self) -> [usize; 3] {
         [
@@ -219,6 +250,24 @@ impl BoxWide {
             return true;
         }
         self.walk8_in::<false>(&p, rays.tmin, active, thi, v);
+        true
+    }
+
+    /// Instead of a walk: `v.visit(id, active, ..)` for every id of `ids`
+    /// (a list holding every payload whose box a lane of `active` can meet,
+    /// such as a tile's list filtered by [`crate::ray_plane`]), then
+    /// `v.settle(+inf)`. The visitor's own exact box tests make the same
+    /// visits count as a walk's. Returns `false`, having visited nothing,
+    /// where [`walk8`](Self::walk8) would.
+    pub fn visit_listed(rays: &Rays8, active: u32, thi: &mut [f32; 8], ids: impl Iterator<Item = u32>, v: &mut impl Visit8) -> bool {
+        let Some(p) = Packet8::new(rays.o, rays.d) else { return false };
+        if active != 0 {
+            let lanes = Lanes8 { p: &p };
+            for id in ids {
+                v.visit(id, active, &lanes);
+            }
+        }
+        v.settle(f32::INFINITY, thi);
         true
     }
 

@@ -53,6 +53,20 @@ impl Frustum {
         Frustum(Region::Sweep { lo: origins.min, hi: origins.max, dir })
     }
 
+    /// The plane in which each ray of the region is one point (see
+    /// [`crate::ray_plane`]).
+    pub fn ray_plane(&self) -> Option<crate::ray_plane::RayPlane> {
+        use crate::ray_plane::RayPlane;
+        match &self.0 {
+            Region::Pyramid { apex, edges, .. } => {
+                let mid = edges.iter().fold(Vec3::ZERO, |a, e| a + e.normalize_or_zero());
+                // Every ray of the region must lie in front of the plane's eye.
+                edges.iter().all(|e| e.dot(mid) > 0.0).then(|| RayPlane::perspective(*apex, mid)).flatten()
+            }
+            Region::Sweep { lo, hi, dir } => RayPlane::orthographic(*dir, (*lo + *hi) * 0.5, (*hi - *lo).length() * 0.5),
+        }
+    }
+
     /// Can a ray of the region touch the box? Conservative, with a small
     /// relative slack; infinite sides are fine.
     #[inline]
@@ -81,6 +95,47 @@ impl Frustum {
                 let slack = 1e-6 * (1.0 + c.abs().max_element() + h.max_element()) + h * 1e-6;
                 let g = Aabb::new(b.min - h - slack, b.max + h + slack);
                 g.ray_range(c, dir.recip(), 0.0, f32::INFINITY).is_some()
+            }
+        }
+    }
+
+    /// [`Frustum::touches_box`] for the four slot boxes of a 4-wide node
+    /// (`rows` SoA as [`crate::mesh`]'s nodes keep them; empty slots have
+    /// min > max): bit `s` set when slot `s` may be touched. A pyramid tests
+    /// the four at once (the same operations per slot); a region query of
+    /// a tile tests hundreds of boxes.
+    #[inline]
+    pub(crate) fn touches_slots(&self, rows: &[[f32; 4]; 6]) -> u32 {
+        use glam::Vec4;
+        let lo = [Vec4::from_array(rows[0]), Vec4::from_array(rows[2]), Vec4::from_array(rows[4])];
+        let hi = [Vec4::from_array(rows[1]), Vec4::from_array(rows[3]), Vec4::from_array(rows[5])];
+        let full = (lo[0].cmple(hi[0]) & lo[1].cmple(hi[1]) & lo[2].cmple(hi[2])).bitmask();
+        match &self.0 {
+            Region::Pyramid { apex, planes, .. } => {
+                let mut keep = full;
+                for &n in planes {
+                    if n == Vec3::ZERO {
+                        continue; // (0 . p is 0, never below the slack)
+                    }
+                    let pick = |a: usize| if n[a] >= 0.0 { hi[a] } else { lo[a] } - Vec4::splat(apex[a]);
+                    let (px, py, pz) = (pick(0), pick(1), pick(2));
+                    let v = px * n.x + py * n.y + pz * n.z;
+                    let m = px.abs().max(py.abs()).max(pz.abs());
+                    // As `touches_box`: a NaN (0 * inf) compares false and
+                    // does not cull.
+                    keep &= !v.cmplt((m + Vec4::ONE) * -1e-6).bitmask();
+                }
+                keep
+            }
+            Region::Sweep { .. } => {
+                let mut keep = 0;
+                for s in 0..4 {
+                    if full & (1 << s) != 0 {
+                        let b = Aabb::new(Vec3::new(rows[0][s], rows[2][s], rows[4][s]), Vec3::new(rows[1][s], rows[3][s], rows[5][s]));
+                        keep |= (self.touches_box(&b) as u32) << s;
+                    }
+                }
+                keep
             }
         }
     }

@@ -32,6 +32,7 @@ pub mod poly;
 pub mod polytope;
 pub mod quartic;
 pub mod ray;
+pub mod ray_plane;
 mod simd8;
 pub mod sweep;
 pub mod table;

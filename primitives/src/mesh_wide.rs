@@ -34,6 +34,12 @@ impl Node4 {
         (b[0][s] <= b[1][s]).then(|| crate::aabb::Aabb::new(Vec3::new(b[0][s], b[2][s], b[4][s]), Vec3::new(b[1][s], b[3][s], b[5][s])))
     }
 
+    /// The slots' boxes, SoA: min x, max x, min y, max y, min z, max z.
+    #[inline(always)]
+    pub(crate) fn rows(&self) -> &[[f32; 4]; 6] {
+        &self.b
+    }
+
     /// Sets the child code of slot `s`.
     pub(crate) fn set_child(&mut self, s: usize, code: u32) {
         self.child[s] = code;

@@ -1,0 +1,215 @@
+//! A plane in which every ray of a region is one point: the rays through
+//! one eye (a tile of camera rays) seen in perspective from it, or rays of
+//! one direction (a tile's shadow rays to a directional light) seen along
+//! it. A box that a ray meets holds a point of the ray, so the ray's point
+//! lies in the box's shadow on the plane ([`RayPlane::box2d`], a
+//! conservative 2D box); a packet of rays whose points all lie outside that
+//! shadow cannot meet the box. Tiles list the children of a wide union with
+//! their shadows once, and each packet keeps those whose shadow meets its
+//! own points' box, instead of walking the union's tree
+//! (see `rothray_csg::tile`).
+
+use glam::{DVec3, Vec3};
+
+use crate::aabb::Aabb;
+
+/// See the module documentation.
+#[derive(Clone, Copy, Debug)]
+pub struct RayPlane {
+    /// Perspective from `at` (rays must start there), or orthographic along
+    /// `dir` (rays must have exactly that direction) with `at` a reference
+    /// point near the region.
+    persp: bool,
+    at: Vec3,
+    /// Orthographic: how far ray origins lie from `at` at most.
+    spread: f64,
+    dir: Vec3,
+    at64: DVec3,
+    /// Orthonormal: `w` along the view (perspective: the region's mid
+    /// direction; orthographic: `dir`), `u` and `v` across it.
+    u: DVec3,
+    v: DVec3,
+    w: DVec3,
+}
+
+/// A 2D box `[u0, v0, u1, v1]`; all of the plane is `[-inf, -inf, inf, inf]`.
+pub type Box2 = [f32; 4];
+
+/// The whole plane.
+pub const ALL: Box2 = [f32::NEG_INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::INFINITY];
+
+/// Relative slack on the shadows: an f32 slab test can accept a ray that
+/// misses the box by a few ulps of the distances involved (1e-7 relative);
+/// the shadows are grown by 100 times that.
+const SLACK: f64 = 1e-5;
+
+fn basis(w: DVec3) -> (DVec3, DVec3) {
+    let u = w.any_orthonormal_vector();
+    (u, w.cross(u))
+}
+
+impl RayPlane {
+    /// Rays from `eye` with directions `d` where `d . mid > 0`, seen from the eye.
+    pub fn perspective(eye: Vec3, mid: Vec3) -> Option<RayPlane> {
+        let w = mid.as_dvec3().normalize_or_zero();
+        if w == DVec3::ZERO || !eye.is_finite() {
+            return None;
+        }
+        let (u, v) = basis(w);
+        Some(RayPlane { persp: true, at: eye, spread: 0.0, dir: Vec3::ZERO, at64: eye.as_dvec3(), u, v, w })
+    }
+
+    /// Rays of direction exactly `dir` from points within `spread` of `near`.
+    pub fn orthographic(dir: Vec3, near: Vec3, spread: f32) -> Option<RayPlane> {
+        let w = dir.as_dvec3().normalize_or_zero();
+        if w == DVec3::ZERO || !near.is_finite() {
+            return None;
+        }
+        let (u, v) = basis(w);
+        Some(RayPlane { persp: false, at: near, spread: spread as f64, dir, at64: near.as_dvec3(), u, v, w })
+    }
+
+    /// The point of the ray `(o, d)`, or `None` when it is not a ray of the
+    /// plane (another origin, for a perspective; another direction, for an
+    /// orthographic one).
+    #[inline]
+    pub fn point(&self, o: Vec3, d: Vec3) -> Option<[f64; 2]> {
+        if self.persp {
+            let d = d.as_dvec3();
+            let z = d.dot(self.w);
+            (o == self.at && z > 0.0).then(|| [d.dot(self.u) / z, d.dot(self.v) / z])
+        } else {
+            let q = o.as_dvec3() - self.at64;
+            (d == self.dir).then(|| [q.dot(self.u), q.dot(self.v)])
+        }
+    }
+
+    /// The 2D box of the points of the rays of `pts` (none: `None`), grown
+    /// by the rounding of their computation ([`SLACK`] of their size).
+    pub fn points_box(pts: impl Iterator<Item = [f64; 2]>) -> Option<Box2> {
+        let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for p in pts {
+            b = [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
+        }
+        if !(b[0] <= b[2]) {
+            return None;
+        }
+        let s = SLACK * (b[0].abs().max(b[1].abs()).max(b[2].abs()).max(b[3].abs()));
+        Some(outward([b[0] - s, b[1] - s, b[2] + s, b[3] + s]))
+    }
+
+    /// A 2D box holding the point of every ray of the plane that an f32
+    /// slab test ([`Aabb::ray_range`]) says meets `b` ([`ALL`] when the box
+    /// reaches the eye's side plane, or is not finite).
+    pub fn box2d(&self, b: &Aabb) -> Box2 {
+        if !b.is_finite() || b.is_empty() {
+            return ALL;
+        }
+        let c = (b.min.as_dvec3() + b.max.as_dvec3()) * 0.5 - self.at64;
+        let h = (b.max.as_dvec3() - b.min.as_dvec3()) * 0.5;
+        // The box's extent along each plane axis (the sum of its half
+        // extents' projections), and how far it lies from `at`, for the slack.
+        let ext = |a: DVec3| a.abs().dot(h);
+        let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
+        let (hu, hv, hw) = (ext(self.u), ext(self.v), ext(self.w));
+        let size = c.abs().max_element() + h.max_element();
+        if !self.persp {
+            // A ray origin's distance to the box's planes, which the slab
+            // test's rounding is relative to, is at most `size` plus its own
+            // distance to `at`.
+            let s = SLACK * (size + self.spread);
+            return outward([cu - hu - s, cv - hv - s, cu + hu + s, cv + hv + s]);
+        }
+        // Perspective: every point of the box has depth in [cw - hw, cw + hw]
+        // and plane coordinates in [cu - hu, cu + hu] (resp. v), so its
+        // projection lies in the quotients' interval.
+        let z0 = cw - hw;
+        if z0 <= SLACK * size {
+            return ALL;
+        }
+        let z1 = cw + hw;
+        let div = |n0: f64, n1: f64| {
+            let q = [n0 / z0, n0 / z1, n1 / z0, n1 / z1];
+            (q[0].min(q[1]).min(q[2]).min(q[3]), q[0].max(q[1]).max(q[2]).max(q[3]))
+        };
+        let (u0, u1) = div(cu - hu, cu + hu);
+        let (v0, v1) = div(cv - hv, cv + hv);
+        let s = SLACK * size / z0;
+        outward([u0 - s, v0 - s, u1 + s, v1 + s])
+    }
+}
+
+/// `b` in f32, rounded outwards (a conversion rounds to nearest: one ulp
+/// more covers it).
+fn outward(b: [f64; 4]) -> Box2 {
+    let dn = |x: f64| {
+        let f = x as f32;
+        if (f as f64) > x {
+            f.next_down()
+        } else {
+            f
+        }
+    };
+    let up = |x: f64| {
+        let f = x as f32;
+        if (f as f64) < x {
+            f.next_up()
+        } else {
+            f
+        }
+    };
+    [dn(b[0]), dn(b[1]), up(b[2]), up(b[3])]
+}
+
+/// Do the 2D boxes meet?
+#[inline(always)]
+pub fn meets(a: &Box2, b: &Box2) -> bool {
+    a[0] <= b[2] && b[0] <= a[2] && a[1] <= b[3] && b[1] <= a[3]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    /// Every ray that the f32 slab test says meets a box has its point in
+    /// the box's shadow: random boxes and rays grazing them, perspective and
+    /// orthographic, near and far from the origin.
+    #[test]
+    fn a_ray_meeting_a_box_lies_in_its_shadow() {
+        let seed = 41u64;
+        println!("seed {seed}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let mut met = 0;
+        for i in 0..200_000 {
+            let far = [0.0f32, 1e3, 1e5][i % 3];
+            let c = Vec3::new(rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0)) + Vec3::splat(far);
+            let h = Vec3::new(rng.gen_range(0.001..2.0), rng.gen_range(0.001..2.0), rng.gen_range(0.001..2.0));
+            let b = Aabb::new(c - h, c + h);
+            // Aim at a point near a corner or face of the box.
+            let mut target = c + h * Vec3::new(rng.gen_range(-1.02..1.02), rng.gen_range(-1.02..1.02), rng.gen_range(-1.02..1.02));
+            if rng.gen_bool(0.5) {
+                target[i % 3] = if rng.gen_bool(0.5) { b.min[i % 3] } else { b.max[i % 3] };
+            }
+            let (o, d, plane) = if i % 2 == 0 {
+                let eye = c + Vec3::new(rng.gen_range(-20.0..20.0), rng.gen_range(-20.0..20.0), rng.gen_range(-20.0..20.0));
+                let d = target - eye;
+                let mid = d + Vec3::new(rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1)) * d.length();
+                (eye, d, RayPlane::perspective(eye, mid).unwrap())
+            } else {
+                let dir = Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
+                let o = target - dir * rng.gen_range(0.0..20.0);
+                let at = c + Vec3::splat(rng.gen_range(-3.0..3.0));
+                (o, dir, RayPlane::orthographic(dir, at, (o - at).length()).unwrap())
+            };
+            if b.ray_range(o, d.recip(), 0.0, f32::INFINITY).is_none() {
+                continue;
+            }
+            met += 1;
+            let p = plane.point(o, d).expect("a ray of the plane");
+            let pb = RayPlane::points_box(std::iter::once(p)).unwrap();
+            assert!(meets(&pb, &plane.box2d(&b)), "case {i}: ray {o} {d} meets {b:?} outside its shadow");
+        }
+        assert!(met > 50_000, "too few rays met their boxes: {met}");
+    }
+}
