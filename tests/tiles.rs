@@ -307,6 +307,8 @@ fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
 #[test]
 fn packets_walk_wide_unions_together() {
     let (mut rays, mut hits, mut shadows) = (0u64, 0u64, 0u64);
+    // Tiles whose wide unions were listed (see rothray::csg::tile_list).
+    let mut lists = 0u64;
     let _ = rothray::csg::take_eval_counts();
     for seed in 0..100u64 {
         let seed = 0x3a11 + seed;
@@ -354,6 +356,7 @@ fn packets_walk_wide_unions_together() {
                     scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
                     scene.occluded_packet(&packet, &mut ps, &mut blocked, Some(&view));
                 }
+                lists += ts.take_counts().spec.lists;
                 for k in 0..8 {
                     assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
                     shadows += blocked[k] as u64;
@@ -375,8 +378,9 @@ fn packets_walk_wide_unions_together() {
     }
     let c = rothray::csg::take_eval_counts();
     println!(
-        "{rays} rays, {hits} hits, {shadows} blocked (any-hit); wide-union evaluations answered by packet walks {}, not answered {}",
+        "{rays} rays, {hits} hits, {shadows} blocked (any-hit); wide-union evaluations answered by packet walks {}, not answered {}; tiles' lists of wide unions {lists}",
         c.packet_lanes, c.packet_misses
     );
     assert!(hits > rays / 5 && shadows > rays / 5 && c.packet_lanes > rays / 3, "too few hits or packet-walked lanes to test");
+    assert!(lists > 1000, "too few tiles listed their wide unions to test: {lists}");
 }
