@@ -116,7 +116,7 @@ impl TileProgram {
         // (The same for every object of the tile: a few flops.)
         self.prog.ray_plane = region.ray_plane();
         let mut s = Spec { base, leaves, region, tp: self };
-        s.node(root, 0)
+        s.node(root, 0, true)
     }
 }
 
@@ -138,7 +138,10 @@ impl Spec<'_> {
         planes.first().is_none_or(|p| self.region.touches_plane(p))
     }
 
-    fn node(&mut self, n: u32, depth: u32) -> Option<u32> {
+    /// Node `n` specialised; `nearest`: its evaluation is in nearest mode
+    /// (as an object's root is; see `Program::child_mode`), where packets
+    /// walk wide unions together.
+    fn node(&mut self, n: u32, depth: u32, nearest: bool) -> Option<u32> {
         let b = self.base;
         let nu = n as usize;
         let kind = b.kind[nu];
@@ -157,12 +160,18 @@ impl Spec<'_> {
         }
         let (first, count) = (b.first[nu] as usize, b.count[nu] as usize);
         if b.wide[nu] != u32::MAX {
-            return self.wide(n, depth);
+            return self.wide(n, depth, nearest);
         }
         let at = self.tp.kids.len();
         let mut changed = false;
         for (pos, &c) in b.children[first..first + count].iter().enumerate() {
-            let r = self.node(c, depth + 1);
+            let child_nearest = nearest
+                && match kind {
+                    NodeKind::Intersection => pos > 0,
+                    NodeKind::Difference => pos == 0,
+                    _ => true,
+                };
+            let r = self.node(c, depth + 1, child_nearest);
             match (kind, r) {
                 // An empty operand of an intersection, or an empty positive
                 // operand of a difference: the node is empty.
@@ -196,7 +205,7 @@ impl Spec<'_> {
     /// difference is its positive operand alone when the region meets no
     /// subtrahend, and gets a short list of the subtrahends met when there are
     /// few. Either stays as baked when the region meets many.
-    fn wide(&mut self, n: u32, depth: u32) -> Option<u32> {
+    fn wide(&mut self, n: u32, depth: u32, nearest: bool) -> Option<u32> {
         let b = self.base;
         let nu = n as usize;
         let w = &b.wides[b.wide[nu] as usize];
@@ -215,18 +224,20 @@ impl Spec<'_> {
             }
         }
         // A packet union the tile meets many children of gets a list of
-        // them (up to LIST_MAX), so count that far.
-        let listing = kind == NodeKind::Union && self.tp.prog.ray_plane.is_some() && b.is_packet_union(n);
+        // them (up to LIST_MAX), so count that far; only where packets walk
+        // it (in nearest mode: cheese's union of 1000 holes, a subtrahend,
+        // paid 2-3% of its instructions for lists no packet read).
+        let listing = nearest && kind == NodeKind::Union && self.tp.prog.ray_plane.is_some() && b.is_packet_union(n);
         let unbounded = self.tp.kids.len() - at;
         {
             // The children of the tree's leaves whose boxes the region
-            // touches: a leaf of one child has that child's box (the most
-            // common case), one of more lists a child or two more than the
-            // region meets, which costs their rays a box test (a short
-            // difference, a list) or nothing (a narrow union specialises
-            // each child below). Testing each child's own box as well cost
-            // scenes/forest 2% of its instructions lit.
+            // touches, each tested on its own box too (a leaf may hold a
+            // few), except for a list: an extra child there costs a packet a
+            // box test at most, and the tests cost scenes/forest 2% of its
+            // instructions lit. (Counted without them, scenes/cheese's
+            // differences passed SHORT_LIST more often: +2% instructions.)
             let region = self.region;
+            let (children, bounds) = (&b.children[first..], &b.bounds);
             let kids = std::cell::RefCell::new(&mut self.tp.kids);
             let most = match kind {
                 NodeKind::Difference => SHORT_LIST,
@@ -239,7 +250,7 @@ impl Spec<'_> {
                 || kids.borrow().len() < limit,
                 |pos| {
                     let mut k = kids.borrow_mut();
-                    if k.len() < limit {
+                    if k.len() < limit && (listing || region.touches_box(&bounds[children[pos as usize] as usize])) {
                         k.push(pos);
                     }
                 },
@@ -249,7 +260,7 @@ impl Spec<'_> {
         let met = self.tp.kids.len() - at;
         match kind {
             NodeKind::Difference => {
-                let Some(pos) = self.node(b.children[first], depth + 1) else { return self.drop_kids(at) };
+                let Some(pos) = self.node(b.children[first], depth + 1, nearest) else { return self.drop_kids(at) };
                 if met == 0 {
                     return self.drop_kids(at).or(Some(pos));
                 }
@@ -277,7 +288,7 @@ impl Spec<'_> {
                 self.tp.kids.truncate(at);
                 pos.sort_unstable();
                 for p in pos {
-                    if let Some(x) = self.node(b.children[first + p as usize], depth + 1) {
+                    if let Some(x) = self.node(b.children[first + p as usize], depth + 1, nearest) {
                         self.tp.kids.push(x);
                     }
                 }

@@ -79,7 +79,7 @@ impl PacketMemo {
         }
         let i = match u.recs[..u.len].iter().position(|e| e.leaf == n) {
             Some(i) => i,
-            None => u.walk(prog, leaves, n),
+            None => u.walk(prog, leaves, n, self),
         };
         let e = &u.recs[i];
         let (lo, hi) = range;
@@ -103,11 +103,16 @@ impl UnionRecords {
     /// Walks wide leaf union `n` of `prog` in nearest mode for the packet's
     /// lanes, each on its ray's whole range, into a new record; returns its
     /// place.
-    fn walk(&mut self, prog: &Program, leaves: &LeafTable, n: u32) -> usize {
+    ///
+    /// The lanes' leaf queries go through the packet's solves (`memo`'s
+    /// [`PacketMemo::leaf_lane`], which answers exactly as the leaf's own
+    /// query): neighbouring rays visit mostly the same children, and one
+    /// 8-lane solve costs about one scalar query.
+    fn walk(&mut self, prog: &Program, leaves: &LeafTable, n: u32, memo: &PacketMemo) -> usize {
         let nu = n as usize;
         let w = prog.wide_of(nu);
         let lanes = self.lanes;
-        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: None });
+        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: Some((memo, k)) });
         let o: [_; 8] = std::array::from_fn(|k| ctx[k].ray.origin);
         let d: [_; 8] = std::array::from_fn(|k| ctx[k].ray.dir);
         let tmin: [f32; 8] = std::array::from_fn(|k| ctx[k].ray.tmin);
