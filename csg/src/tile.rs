@@ -79,6 +79,8 @@ pub struct TileProgram {
     counts: TileCounts,
     /// See [`TileProgram::kernels8`].
     kernels8: bool,
+    /// Is `prog.ray_plane` the current tile's (made when a list first needs it)?
+    plane_set: bool,
 }
 
 impl TileProgram {
@@ -88,6 +90,7 @@ impl TileProgram {
     pub fn begin(&mut self, base: &Program) {
         self.base.follow(&mut self.prog, base, &mut self.follow_counts);
         self.kernels8 = false;
+        self.plane_set = false;
     }
 
     /// What bringing the copy up to date cost so far (for tests: a sync that
@@ -113,8 +116,6 @@ impl TileProgram {
     /// [`TileProgram::prog`] (`root` itself when nothing changed).
     pub fn specialise(&mut self, base: &Program, leaves: &LeafTable, root: u32, region: &Frustum) -> Option<u32> {
         debug_assert_eq!(self.prog.id, base.id, "begin() first");
-        // (The same for every object of the tile: a few flops.)
-        self.prog.ray_plane = region.ray_plane();
         let mut s = Spec { base, leaves, region, tp: self };
         s.node(root, 0, true)
     }
@@ -227,7 +228,7 @@ impl Spec<'_> {
         // them (up to LIST_MAX), so count that far; only where packets walk
         // it (in nearest mode: cheese's union of 1000 holes, a subtrahend,
         // paid 2-3% of its instructions for lists no packet read).
-        let listing = nearest && kind == NodeKind::Union && self.tp.prog.ray_plane.is_some() && b.is_packet_union(n);
+        let listing = nearest && kind == NodeKind::Union && b.is_packet_union(n) && self.ray_plane();
         let unbounded = self.tp.kids.len() - at;
         {
             // The children of the tree's leaves whose boxes the region
@@ -301,6 +302,18 @@ impl Spec<'_> {
                 out
             }
         }
+    }
+
+    /// Has the tile's region a ray plane (`prog.ray_plane`, made on first
+    /// need: every object of a tile is specialised to the same region, and
+    /// most tiles list nothing)?
+    fn ray_plane(&mut self) -> bool {
+        let tp = &mut *self.tp;
+        if !tp.plane_set {
+            tp.prog.ray_plane = self.region.ray_plane();
+            tp.plane_set = true;
+        }
+        tp.prog.ray_plane.is_some()
     }
 
     /// The tile's list of wide union `n`'s bounded children at the

@@ -474,6 +474,31 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
         // An end outside the window is not polished: it lies beyond the
         // range's end, and infinity says so to the caller's clip whatever
         // the rounding (a stand-in converted to t could round onto tmin).
+        if ask.first_only && need0 && need1 && matches!(e1, quartic::RunEnd::Root(_)) {
+            // A nearest query needs this span's exit only where it lies
+            // before the limit the answer is exact to: with the entry in the
+            // range and the exit's piece starting well past it (1% of the
+            // tube's radius: not a grazing chord), the exit's polish is
+            // skipped and the answer is exact up to where that piece starts
+            // (tori: one polish of two per hit; the entry is polished as
+            // `polish_pair` would, bit for bit).
+            let x0 = e0.polish(&c, eps);
+            let (t0, lo1) = (line.t(x0), e1.lo());
+            let t_lo = line.t(lo1);
+            if t0 >= tmin && t0 < tmax && lo1 - x0 > 0.01 * rho && t_lo > t0 {
+                out[count] = (t0, f32::INFINITY);
+                return (count + 1, t_lo);
+            }
+            let x1 = e1.polish(&c, eps);
+            out[count] = (t0, line.t(x1));
+            count += 1;
+            let t1 = line.t(x1);
+            if t1.min(tmax) > t0.max(tmin) && t0 >= tmin {
+                let more = runs[k + 1..nr].iter().any(|r| r.0.lo() <= w_hi);
+                return (count, if more { t1 } else { f32::INFINITY });
+            }
+            continue;
+        }
         let (x0, x1) = match (need0, need1) {
             (true, true) => quartic::RunEnd::polish_pair(&c, e0, e1, eps),
             (true, false) => (e0.polish(&c, eps), f64::INFINITY),
