@@ -44,7 +44,8 @@ impl TileList {
     }
 
     /// The children that the rays `(o[k], d[k])` of the lanes `lanes` can
-    /// meet, or `None` when a lane's ray is not a ray of `plane`.
+    /// meet, or `None` when a lane's ray is not a ray of `plane` (or its
+    /// point is not finite: [`RayPlane::point`]).
     #[inline]
     pub(crate) fn for_rays<'a>(
         &'a self,

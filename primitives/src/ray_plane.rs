@@ -71,17 +71,24 @@ impl RayPlane {
 
     /// The point of the ray `(o, d)`, or `None` when it is not a ray of the
     /// plane (another origin, for a perspective; another direction, for an
-    /// orthographic one).
+    /// orthographic one) or its point is not finite.
     #[inline]
     pub fn point(&self, o: Vec3, d: Vec3) -> Option<[f64; 2]> {
-        if self.persp {
+        let p = if self.persp {
             let d = d.as_dvec3();
             let z = d.dot(self.w);
-            (o == self.at && z > 0.0).then(|| [d.dot(self.u) / z, d.dot(self.v) / z])
+            if o != self.at || !(z > 0.0) {
+                return None;
+            }
+            [d.dot(self.u) / z, d.dot(self.v) / z]
         } else {
+            if d != self.dir {
+                return None;
+            }
             let q = o.as_dvec3() - self.at64;
-            (d == self.dir).then(|| [q.dot(self.u), q.dot(self.v)])
-        }
+            [q.dot(self.u), q.dot(self.v)]
+        };
+        (p[0].is_finite() && p[1].is_finite()).then_some(p)
     }
 
     /// The 2D box of the points of the rays of `pts` (none: `None`), grown
@@ -140,8 +147,12 @@ impl RayPlane {
 }
 
 /// `b` in f32, rounded outwards (a conversion rounds to nearest: one ulp
-/// more covers it).
+/// more covers it); [`ALL`] if a bound is NaN (an overflow on the way: a
+/// NaN bound would meet nothing and drop the box).
 fn outward(b: [f64; 4]) -> Box2 {
+    if b.iter().any(|x| x.is_nan()) {
+        return ALL;
+    }
     let dn = |x: f64| {
         let f = x as f32;
         if (f as f64) > x {
@@ -211,5 +222,22 @@ mod tests {
             assert!(meets(&pb, &plane.box2d(&b)), "case {i}: ray {o} {d} meets {b:?} outside its shadow");
         }
         assert!(met > 50_000, "too few rays met their boxes: {met}");
+    }
+
+    /// Out of range: a shadow that would overflow or be NaN covers the whole
+    /// plane, and a ray whose point is not finite is not a ray of the plane
+    /// (its packet walks the tree instead).
+    #[test]
+    fn overflows_cover_everything() {
+        let p = RayPlane::perspective(Vec3::ZERO, Vec3::Z).unwrap();
+        let huge = Aabb::new(Vec3::new(-3e38, -3e38, 1e-30), Vec3::new(3e38, 3e38, 3e38));
+        assert!(meets(&p.box2d(&huge), &[0.0, 0.0, 0.0, 0.0]));
+        assert_eq!(p.box2d(&Aabb::new(Vec3::splat(-1.0), Vec3::splat(f32::INFINITY))), ALL);
+        assert!(p.point(Vec3::ZERO, Vec3::new(1.0, 0.0, 1e-45)).is_none_or(|q| q[0].is_finite()));
+        assert!(p.point(Vec3::ONE, Vec3::Z).is_none(), "another origin");
+        let o = RayPlane::orthographic(Vec3::Y, Vec3::ZERO, 1.0).unwrap();
+        assert!(o.point(Vec3::ZERO, Vec3::new(0.0, 1.0, 1e-7)).is_none(), "another direction");
+        let far = Aabb::new(Vec3::splat(-3e38), Vec3::splat(3e38));
+        assert!(meets(&o.box2d(&far), &[0.0, 0.0, 0.0, 0.0]));
     }
 }
