@@ -26,6 +26,10 @@
 //! infinitesimal `(-1, eps)` in the projected plane (the rasterizer's top-left
 //! rule). So exactly one of the triangles that tile a neighbourhood of an edge or
 //! vertex reports the crossing: rays never leak through, nor count a crossing twice.
+//! The test runs in f32 where its decision is certain (every edge function is
+//! compared with a bound of its rounding error) and in f64 for the few
+//! triangles where it is not (see [`intersect64`]): decisions that are certain
+//! are the exact ones, so the two kinds stay watertight together.
 
 use crate::{Ray, Span};
 use std::collections::HashMap;
@@ -239,6 +243,8 @@ struct Walk {
 #[derive(Clone, Copy)]
 struct WoopRay {
     o: Vec3,
+    /// The direction (the f64 test makes its own shears from it).
+    d: Vec3,
     k: [usize; 3],
     s: [f32; 3],
 }
@@ -260,7 +266,7 @@ impl WoopRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        WoopRay { o, k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]] }
+        WoopRay { o, d, k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]] }
     }
 }
 
@@ -398,49 +404,65 @@ impl RayBox {
 /// triangle's determinant (its interior is to the left of the edge when `det < 0`).
 /// Equivalent to shifting the point by an infinitesimal `(-1, eps)`.
 #[inline(always)]
-fn owns_edge(dx: f32, dy: f32, det: f32) -> bool {
+fn owns_edge(dx: f64, dy: f64, det: f64) -> bool {
     let upward = dy > 0.0 || (dy == 0.0 && dx > 0.0);
     upward == (det < 0.0)
 }
 
-/// Watertight ray/triangle test (Woop, Benthin, Wald 2013) with exact tie-breaking
-/// on edges and vertices. Returns `(t, det > 0)` for `t` in `[tlo, thi]`.
-#[inline(always)]
+/// Watertight ray/triangle test (Woop, Benthin, Wald 2013) as the mesh
+/// walks make it, for one triangle: the f32 test where its decision is
+/// certain (see [`wide::TriBlock::bound`]; `ball` bounds the corners of the
+/// triangle's block), else [`intersect64`]. Returns `(t, det > 0)` for `t`
+/// in `[tlo, thi]`. The same bits as the lane of the block test.
+#[inline]
+fn intersect_in(r: &WoopRay, tri: &[Vec3; 3], ball: [f32; 4], tlo: f32, thi: f32) -> Option<(f32, bool)> {
+    let blk = wide::TriBlock::single(tri, ball);
+    let b = blk.test(&wide::TriRay4::new(r), tlo, thi);
+    if b.unsure != 0 {
+        return intersect64(r, tri, tlo, thi);
+    }
+    (b.hits != 0).then(|| (b.t.x, b.det.x > 0.0))
+}
+
+/// [`intersect_in`] for a triangle alone (its own ball).
+#[cfg(test)]
 fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, bool)> {
+    intersect_in(r, tri, wide::block_ball(std::slice::from_ref(tri)), tlo, thi)
+}
+
+/// The watertight test in f64, for the triangles the f32 test cannot
+/// decide: a ray that passes within that test's resolution (~1e-6 of its
+/// distance) of an edge line, or runs nearly in a face's plane (the f32
+/// decisions there made whole spans appear or vanish: tests/stress_grazing.rs).
+/// The corners relative to the origin are exact in f64; the shear, edge
+/// functions and t are rounded to f64, the same way for every triangle that
+/// shares an edge, so the decisions stay watertight among themselves, and
+/// exact zeros are resolved by the tie-breaking rule. Its decisions agree
+/// with the f32 test's certain ones (those hold by a margin of ~1e-6 of the
+/// distance, this test's error is ~1e-15 of it).
+#[inline(never)]
+fn intersect64(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, bool)> {
     let [kx, ky, kz] = r.k;
-    let [sx, sy, sz] = r.s;
-    let a = (tri[0] - r.o).to_array();
-    let b = (tri[1] - r.o).to_array();
-    let c = (tri[2] - r.o).to_array();
+    let d = r.d.as_dvec3();
+    let (sx, sy) = (d[kx] / d[kz], d[ky] / d[kz]);
+    let o = r.o.as_dvec3();
+    let a = tri[0].as_dvec3() - o;
+    let b = tri[1].as_dvec3() - o;
+    let c = tri[2].as_dvec3() - o;
     let ax = a[kx] - sx * a[kz];
     let ay = a[ky] - sy * a[kz];
     let bx = b[kx] - sx * b[kz];
     let by = b[ky] - sy * b[kz];
     let cx = c[kx] - sx * c[kz];
     let cy = c[ky] - sy * c[kz];
-    let mut u = cx * by - cy * bx;
-    let mut v = ax * cy - ay * cx;
-    let mut w = bx * ay - by * ax;
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        // Products of f32 are exact in f64, so these signs are exact.
-        let f = |p: f32, q: f32, r: f32, s: f32| {
-            let x = p as f64 * q as f64 - r as f64 * s as f64;
-            let y = x as f32;
-            if y == 0.0 && x != 0.0 {
-                f32::MIN_POSITIVE.copysign(x.signum() as f32)
-            } else {
-                y
-            }
-        };
-        u = f(cx, by, cy, bx);
-        v = f(ax, cy, ay, cx);
-        w = f(bx, ay, by, ax);
-    }
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
     if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
         return None;
     }
     let det = u + v + w;
-    if det == 0.0 {
+    if det == 0.0 || !det.is_finite() {
         return None;
     }
     if (u == 0.0 && !owns_edge(cx - bx, cy - by, det))
@@ -449,10 +471,7 @@ fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, b
     {
         return None;
     }
-    let az = sz * a[kz];
-    let bz = sz * b[kz];
-    let cz = sz * c[kz];
-    let t = (u * az + v * bz + w * cz) / det;
+    let t = ((u * a[kz] + v * b[kz] + w * c[kz]) / (det * d[kz])) as f32;
     if t >= tlo && t <= thi {
         Some((t, det > 0.0))
     } else {
@@ -775,22 +794,8 @@ impl MeshData {
         while let Some(c) = stack.pop() {
             if c & wide::LEAF != 0 {
                 let blk = self.wide.block(c);
-                match blk.test(&r4, tlo, thi) {
-                    wide::Block::Hits(mut m, t, det) => {
-                        while m != 0 {
-                            let l = m.trailing_zeros();
-                            m &= m - 1;
-                            f(Crossing { t: t[l as usize], slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
-                        }
-                    }
-                    wide::Block::Exact => {
-                        for slot in blk.slots() {
-                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, &r, tlo, thi) {
-                                f(Crossing { t, slot, front });
-                            }
-                        }
-                    }
-                }
+                let b = blk.test(&r4, tlo, thi);
+                self.block_crossings(blk, &b, &r, (tlo, thi), &mut f);
                 continue;
             }
             let n = self.wide.node(c);
@@ -799,6 +804,27 @@ impl MeshData {
                 let s = m.trailing_zeros();
                 m &= m - 1;
                 stack.push(n.child(s));
+            }
+        }
+    }
+
+    /// The crossings of one block test `b` (of `blk`, for the ray `r` on
+    /// `[tlo, thi]`): the certain hits lane by lane, then the f64 test's
+    /// answers for the undecided lanes (the order every walk keeps).
+    #[inline(always)]
+    fn block_crossings(&self, blk: &wide::TriBlock, b: &wide::Block, r: &WoopRay, (tlo, thi): (f32, f32), f: &mut impl FnMut(Crossing)) {
+        let mut m = b.hits;
+        while m != 0 {
+            let l = m.trailing_zeros();
+            m &= m - 1;
+            f(Crossing { t: b.t[l as usize], slot: blk.slots().start + l, front: b.det[l as usize] > 0.0 });
+        }
+        let mut m = b.unsure;
+        while m != 0 {
+            let slot = blk.slots().start + m.trailing_zeros();
+            m &= m - 1;
+            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tlo, thi) {
+                f(Crossing { t, slot, front });
             }
         }
     }
@@ -875,13 +901,16 @@ impl MeshData {
                     *best = Some((t, blk.slots().start + l));
                 }
             }
-            wide::Near::Exact => {
-                for slot in blk.slots() {
-                    if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, r, tmin, *thi) {
-                        *best = Some((t, slot));
-                        *thi = t;
+            wide::Near::Unsure(b) => {
+                // The lanes in order, on the range the block was tested on:
+                // the nearest, the last of equals (as `Hit`).
+                let t0 = *thi;
+                self.block_crossings(blk, &b, r, (tmin, t0), &mut |c: Crossing| {
+                    if c.t <= *thi {
+                        *thi = c.t;
+                        *best = Some((c.t, c.slot));
                     }
-                }
+                });
             }
         }
     }
@@ -901,10 +930,15 @@ impl MeshData {
         let mut best: Option<(f32, u32)> = None;
         let mut thi = tmax;
         let mut leaf = |n: &BvhNode, thi: &mut f32| {
+            // The ball of the leaf's block (the same leaves: see `wide::Wide::build`).
+            let ball = wide::block_ball(&self.tris[n.first as usize..(n.first + n.count) as usize]);
+            let t0 = *thi;
             for slot in n.first..n.first + n.count {
-                if let Some((t, _)) = intersect(&r, &self.tris[slot as usize], tmin, *thi) {
-                    best = Some((t, slot));
-                    *thi = t;
+                if let Some((t, _)) = intersect_in(&r, &self.tris[slot as usize], ball, tmin, t0) {
+                    if t <= *thi {
+                        best = Some((t, slot));
+                        *thi = t;
+                    }
                 }
             }
         };
@@ -1256,25 +1290,11 @@ impl MeshData {
         loop {
             if cur & wide::LEAF != 0 {
                 let blk = self.wide.block(cur);
-                match blk.test(&r4, tmin, cut) {
-                    wide::Block::Hits(mut m, t, det) => {
-                        while m != 0 {
-                            let l = m.trailing_zeros();
-                            m &= m - 1;
-                            let t = t[l as usize];
-                            xs.push(Crossing { t, slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
-                            cut = cut.min((t + slack).max(t.next_up()));
-                        }
-                    }
-                    wide::Block::Exact => {
-                        for slot in blk.slots() {
-                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, &r, tmin, cut) {
-                                xs.push(Crossing { t, slot, front });
-                                cut = cut.min((t + slack).max(t.next_up()));
-                            }
-                        }
-                    }
-                }
+                let b = blk.test(&r4, tmin, cut);
+                self.block_crossings(blk, &b, &r, (tmin, cut), &mut |c: Crossing| {
+                    xs.push(c);
+                    cut = cut.min((c.t + slack).max(c.t.next_up()));
+                });
             } else {
                 let n = self.wide.node(cur);
                 let (m, tn) = rb.hit(n, tmin, cut);
@@ -1471,23 +1491,10 @@ impl MeshData {
                     let cut8 = wide::F8(cut);
                     // SAFETY: AVX is only true in `spans_nearest8_avx`, compiled with AVX.
                     let b = unsafe { blk.test8_avx(axes, [ok[axes[0]], ok[axes[1]], ok[axes[2]]], &shear, &tlo8, &cut8) };
-                    let exact = b.inside_any & b.zero_any & need;
-                    let mut mm = exact;
-                    while mm != 0 {
-                        let k = mm.trailing_zeros() as usize;
-                        mm &= mm - 1;
-                        // SAFETY: every active lane was written on the first leaf.
-                        let r = unsafe { rays[k].assume_init_ref() };
-                        for slot in blk.slots() {
-                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
-                                xs[k].push(Crossing { t, slot, front });
-                                cut[k] = cut[k].min(stop(k, t));
-                                shrunk = true;
-                            }
-                        }
-                    }
+                    // Each ray's crossings in the order of `block_crossings`:
+                    // the certain hits lane by lane, then the undecided lanes.
                     for l in 0..blk.slots().len() {
-                        let mut m = b.ok[l] & need & !exact;
+                        let mut m = b.ok[l] & need;
                         while m != 0 {
                             let k = m.trailing_zeros() as usize;
                             m &= m - 1;
@@ -1495,6 +1502,24 @@ impl MeshData {
                             xs[k].push(Crossing { t, slot: blk.slots().start + l as u32, front: b.front[l] & (1 << k) != 0 });
                             cut[k] = cut[k].min(stop(k, t));
                             shrunk = true;
+                        }
+                    }
+                    let mut mm = (b.unsure[0] | b.unsure[1] | b.unsure[2] | b.unsure[3]) & need;
+                    while mm != 0 {
+                        let k = mm.trailing_zeros() as usize;
+                        mm &= mm - 1;
+                        // SAFETY: every active lane was written on the first leaf.
+                        let r = unsafe { rays[k].assume_init_ref() };
+                        for l in 0..blk.slots().len() {
+                            if b.unsure[l] & (1 << k) == 0 {
+                                continue;
+                            }
+                            let slot = blk.slots().start + l as u32;
+                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut8.0[k]) {
+                                xs[k].push(Crossing { t, slot, front });
+                                cut[k] = cut[k].min(stop(k, t));
+                                shrunk = true;
+                            }
                         }
                     }
                     need = 0;
@@ -1505,27 +1530,13 @@ impl MeshData {
                     mm &= mm - 1;
                     // SAFETY: every active lane was written on the first leaf.
                     let r = unsafe { rays[k].assume_init_ref() };
-                    match blk.test(&wide::TriRay4::new(r), tmin[k], cut[k]) {
-                        wide::Block::Hits(mut m, t, det) => {
-                            while m != 0 {
-                                let l = m.trailing_zeros();
-                                m &= m - 1;
-                                let t = t[l as usize];
-                                xs[k].push(Crossing { t, slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
-                                cut[k] = cut[k].min(stop(k, t));
-                                shrunk = true;
-                            }
-                        }
-                        wide::Block::Exact => {
-                            for slot in blk.slots() {
-                                if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
-                                    xs[k].push(Crossing { t, slot, front });
-                                    cut[k] = cut[k].min(stop(k, t));
-                                    shrunk = true;
-                                }
-                            }
-                        }
-                    }
+                    let ck = cut[k];
+                    let b = blk.test(&wide::TriRay4::new(r), tmin[k], ck);
+                    self.block_crossings(blk, &b, r, (tmin[k], ck), &mut |c: Crossing| {
+                        xs[k].push(c);
+                        cut[k] = cut[k].min(stop(k, c.t));
+                        shrunk = true;
+                    });
                 }
                 if shrunk {
                     thi = far(&cut, active);
