@@ -232,26 +232,69 @@ struct Crossing {
 /// ray, the range it clips to and the leaf id its surfaces carry.
 #[derive(Clone, Copy)]
 struct Walk {
-    o: Vec3,
-    d: Vec3,
+    /// The exact line (`refine` works on it).
+    x: Line64,
+    /// 0 where the f32 ray is the line, else its origin's largest
+    /// coordinate (how far the rounding may have moved the f32 ray).
+    far: f64,
     tmin: f32,
     tmax: f32,
     leaf: u32,
+}
+
+/// The exact line of a ray in the mesh's frame, `o + t d` in f64: the f32
+/// ray the walks trace is this line rounded (a mesh under a transform is
+/// given its rays through an f64 map, rounded once).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line64 {
+    /// Origin.
+    pub o: DVec3,
+    /// Direction.
+    pub d: DVec3,
+    /// The f32 ray traced may be a rounding of this line (else it is the
+    /// line itself).
+    pub rounded: bool,
+}
+
+impl Line64 {
+    /// The line of an f32 ray (exact).
+    #[inline(always)]
+    pub fn of(o: Vec3, d: Vec3) -> Line64 {
+        Line64 { o: o.as_dvec3(), d: d.as_dvec3(), rounded: false }
+    }
+}
+
+impl Walk {
+    #[inline(always)]
+    fn new(x: Line64, tmin: f32, tmax: f32, leaf: u32) -> Walk {
+        let far = if x.rounded { x.o.abs().max_element() } else { 0.0 };
+        Walk { x, far, tmin, tmax, leaf }
+    }
 }
 
 /// Per-ray constants of the watertight test.
 #[derive(Clone, Copy)]
 struct WoopRay {
     o: Vec3,
-    /// The direction (the f64 test makes its own shears from it).
-    d: Vec3,
     k: [usize; 3],
     s: [f32; 3],
+    /// The exact line (the f64 test's and `refine`'s).
+    x: Line64,
+    /// The error bound's coefficients ([`wide::TriBlock::bound`]): larger
+    /// where the f32 ray is a rounding of `x`.
+    k1: f32,
+    k0: f32,
 }
 
 impl WoopRay {
     #[inline(always)]
     fn new(o: Vec3, d: Vec3) -> WoopRay {
+        WoopRay::on(o, d, Line64::of(o, d))
+    }
+
+    /// The constants of the f32 ray `(o, d)`, a rounding of the line `x`.
+    #[inline(always)]
+    fn on(o: Vec3, d: Vec3, x: Line64) -> WoopRay {
         let a = d.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
             0
@@ -266,7 +309,10 @@ impl WoopRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        WoopRay { o, d, k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]] }
+        // A rounded ray moves each projected corner by up to 2 u |o|_inf
+        // (the origin) and 2 u M (the shears): see `TriBlock::bound`.
+        let (k1, k0) = if x.rounded { (wide::K1_ROUNDED, wide::K0_ROUNDED * o.abs().max_element()) } else { (wide::K1, 0.0) };
+        WoopRay { o, k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]], x, k1, k0 }
     }
 }
 
@@ -288,6 +334,10 @@ pub struct NearestRays8<'a> {
     /// collecting up to `b` (a CSG difference whose subtrahend covers `[a, b]`
     /// needs the crossings up to where it ends); empty (`a > b`) for none.
     pub through: &'a [[f32; 2]; 8],
+    /// The exact lines the f32 rays round (common origin, directions), for
+    /// a mesh under a transform (see [`MeshData::spans_on`]); `None`: the
+    /// f32 rays are exact.
+    pub exact: Option<(DVec3, &'a [DVec3; 8])>,
 }
 
 /// No [`NearestRays8::through`] intervals.
@@ -443,9 +493,8 @@ fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, b
 #[inline(never)]
 fn intersect64(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, bool)> {
     let [kx, ky, kz] = r.k;
-    let d = r.d.as_dvec3();
+    let (o, d) = (r.x.o, r.x.d);
     let (sx, sy) = (d[kx] / d[kz], d[ky] / d[kz]);
-    let o = r.o.as_dvec3();
     let a = tri[0].as_dvec3() - o;
     let b = tri[1].as_dvec3() - o;
     let c = tri[2].as_dvec3() - o;
@@ -781,11 +830,11 @@ impl MeshData {
 
     /// Calls `f` for every triangle crossing in `[tlo, thi]`, in no particular order.
     #[inline]
-    fn for_each_crossing(&self, o: Vec3, d: Vec3, tlo: f32, thi: f32, mut f: impl FnMut(Crossing)) {
+    fn for_each_crossing(&self, (o, d, x): (Vec3, Vec3, Line64), tlo: f32, thi: f32, mut f: impl FnMut(Crossing)) {
         if self.wide.is_empty() {
             return;
         }
-        let r = WoopRay::new(o, d);
+        let r = WoopRay::on(o, d, x);
         let r4 = wide::TriRay4::new(&r);
         let rb = wide::Ray4::new(o, d);
         // All hits: no ordering, no pruning. A plain array for the stack
@@ -857,7 +906,7 @@ impl MeshData {
     /// points against the ray. For tests and diagnostics (allocates).
     pub fn crossings(&self, o: Vec3, d: Vec3, tlo: f32, thi: f32) -> Vec<(f32, u32, i32)> {
         let mut v = Vec::new();
-        self.for_each_crossing(o, d, tlo, thi, |c| v.push((c.t, c.slot, if c.front { 1 } else { -1 })));
+        self.for_each_crossing((o, d, Line64::of(o, d)), tlo, thi, |c| v.push((c.t, c.slot, if c.front { 1 } else { -1 })));
         // Entering first on ties (a ray grazing an edge touches it in and out at one t).
         v.sort_by(|a, b| a.0.total_cmp(&b.0).then(b.2.cmp(&a.2)));
         v
@@ -1133,6 +1182,12 @@ impl MeshData {
     /// carry `Surf { leaf, sub }` with `sub` = triangle slot, `| SUB_FLIP` when the
     /// triangle faces inward there.
     pub fn spans<S: SpanSink + ?Sized>(&self, ray: &Ray, leaf: u32, out: &mut S) {
+        self.spans_on(ray, Line64::of(ray.origin, ray.dir), leaf, out)
+    }
+
+    /// [`MeshData::spans`] of the f32 ray `ray`, a rounding of the exact line
+    /// `x`: the crossings are decided and the ends refined for `x`.
+    pub fn spans_on<S: SpanSink + ?Sized>(&self, ray: &Ray, x: Line64, leaf: u32, out: &mut S) {
         let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         if !(tmax >= tmin) {
             return;
@@ -1142,24 +1197,24 @@ impl MeshData {
             InsideRule::Orientation => {
                 if self.outside_at(o, d, tmin) {
                     // The count at tmin is zero: only the crossings up to tmax matter.
-                    self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
+                    self.for_each_crossing((o, d, x), tmin, tmax, |c| xs.push(c));
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, Walk { o, d, tmin, tmax, leaf }, out);
+                    self.walk_signed(&xs, 0, Walk::new(x, tmin, tmax, leaf), out);
                     return;
                 }
                 // Collect to the box exit: the crossings past tmax tell how deep inside
                 // the ray is at tmin (the signed count over the whole line is zero).
-                self.for_each_crossing(o, d, tmin, f32::INFINITY, |c| xs.push(c));
+                self.for_each_crossing((o, d, x), tmin, f32::INFINITY, |c| xs.push(c));
                 self.sort_signed(&mut xs);
                 let count: i32 = xs.iter().map(|c| -self.sign(c)).sum();
-                self.walk_signed(&xs, count, Walk { o, d, tmin, tmax, leaf }, out);
+                self.walk_signed(&xs, count, Walk::new(x, tmin, tmax, leaf), out);
             }
             InsideRule::Winding => {
                 let Some(&root) = self.bvh.nodes.first() else { return };
                 let Some((lo, hi)) = RayBox::new(o, d).range(&root, tmin, tmax) else { return };
                 // [tmin, tmax], not [lo, hi]: the box's slab parameters and a triangle's t
                 // round differently; pieces outside [lo, hi] are empty.
-                self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
+                self.for_each_crossing((o, d, x), tmin, tmax, |c| xs.push(c));
                 sort_crossings(&mut xs, |_| true);
                 let end_surf = |t: f32, clip: f32| {
                     if t == clip {
@@ -1170,7 +1225,7 @@ impl MeshData {
                 };
                 // Walk the pieces between consecutive crossings (decided by
                 // the f32 t; the ends pushed refined as `walk_signed`'s).
-                let w = Walk { o, d, tmin, tmax, leaf };
+                let w = Walk::new(x, tmin, tmax, leaf);
                 let mut floor = tmin;
                 let mut inside = false;
                 let mut start = (lo, end_surf(lo, tmin));
@@ -1266,17 +1321,18 @@ impl MeshData {
     #[inline]
     fn refine(&self, c: &Crossing, w: &Walk, lo: f32) -> f32 {
         let [a, b, e] = self.tris[c.slot as usize].map(|v| v.as_dvec3());
-        let (n, dd) = ((b - a).cross(e - a), w.d.as_dvec3());
+        let (n, dd) = ((b - a).cross(e - a), w.x.d);
         let den = n.dot(dd);
-        let ao = a - w.o.as_dvec3();
+        let ao = a - w.x.o;
         // No further than the f32 test itself may be off (8 f32 epsilons of
-        // the vertex's distance from the origin, stretched by 1 / sin), nor
-        // than the triangle's size along the ray: where the ray runs so close
-        // to the plane that the test's choice of triangle is itself rounding,
-        // the plane's crossing may lie far off the triangle.
+        // the vertex's distance from the origin, and of the origin's own
+        // size where the f32 ray is a rounding of the line, stretched by 1 /
+        // sin), nor than the triangle's size along the ray: where the ray
+        // runs so close to the plane that the test's choice of triangle is
+        // itself rounding, the plane's crossing may lie far off the triangle.
         let size = (b - a).abs().max((e - a).abs()).max_element();
-        let tol =
-            ((8.0 * f32::EPSILON as f64) * ao.abs().max_element() * n.abs().element_sum() / den.abs()).min(size / dd.abs().max_element());
+        let reach = ao.abs().max_element() + w.far;
+        let tol = ((8.0 * f32::EPSILON as f64) * reach * n.abs().element_sum() / den.abs()).min(size / dd.abs().max_element());
         let t = n.dot(ao) / den;
         // (max / min, not clamp: no panic whatever the bounds.)
         let t = if t.is_finite() { t.max(c.t as f64 - tol).min(c.t as f64 + tol) as f32 } else { c.t };
@@ -1294,15 +1350,21 @@ impl MeshData {
     /// the full query (returning infinity) where the count at `tmin` is not known
     /// to be zero (the point at `tmin` inside the bounds) or for the winding rule.
     pub fn spans_nearest<S: SpanSink + ?Sized>(&self, ray: &Ray, slack: f32, leaf: u32, out: &mut S) -> f32 {
+        self.spans_nearest_on(ray, Line64::of(ray.origin, ray.dir), slack, leaf, out)
+    }
+
+    /// [`MeshData::spans_nearest`] of the f32 ray `ray`, a rounding of the
+    /// exact line `x` (as [`MeshData::spans_on`]).
+    pub fn spans_nearest_on<S: SpanSink + ?Sized>(&self, ray: &Ray, x: Line64, slack: f32, leaf: u32, out: &mut S) -> f32 {
         let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         if !(tmax >= tmin) || self.wide.is_empty() {
             return f32::INFINITY;
         }
         if self.rule != InsideRule::Orientation || !self.outside_at(o, d, tmin) {
-            self.spans(ray, leaf, out);
+            self.spans_on(ray, x, leaf, out);
             return f32::INFINITY;
         }
-        let r = WoopRay::new(o, d);
+        let r = WoopRay::on(o, d, x);
         let r4 = wide::TriRay4::new(&r);
         let rb = wide::Ray4::new(o, d);
         let mut xs: SmallVec<[Crossing; 32]> = SmallVec::new();
@@ -1329,7 +1391,7 @@ impl MeshData {
                         }
                         Err(()) => {
                             // A degenerate tree deeper than the stack: the unpruned walk.
-                            self.spans(ray, leaf, out);
+                            self.spans_on(ray, x, leaf, out);
                             return f32::INFINITY;
                         }
                     }
@@ -1341,7 +1403,7 @@ impl MeshData {
                     // Crossings found before `cut` shrank may lie past it: not all
                     // of their neighbours were seen.
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, Walk { o, d, tmin, tmax: cut.min(tmax), leaf }, out);
+                    self.walk_signed(&xs, 0, Walk::new(x, tmin, cut.min(tmax), leaf), out);
                     return cut;
                 }
             }
@@ -1397,7 +1459,8 @@ impl MeshData {
         leaf: u32,
         out: &mut [Vec<Span>; 8],
     ) -> (u32, [f32; 8]) {
-        let NearestRays8 { o, d, tmin, tmax, slack, through } = *q;
+        let NearestRays8 { o, d, tmin, tmax, slack, through, exact } = *q;
+        let line = |k: usize| exact.map_or(Line64::of(o, d[k]), |(xo, xd)| Line64 { o: xo, d: xd[k], rounded: true });
         // Where ray `k`'s walk may stop once it has met a crossing at `t`.
         let stop = |k: usize, t: f32| {
             let c = (t + slack[k]).max(t.next_up());
@@ -1458,6 +1521,7 @@ impl MeshData {
         // axis, whether they share the projection axes `axes`, their starts.
         let mut ready = 0u32;
         let mut shear = [wide::F8([0.0; 8]); 3];
+        let mut k10 = [wide::F8([0.0; 8]); 2];
         let mut shared = true;
         let mut axes = [0usize, 1, 2];
         let mut tlo8 = wide::F8([0.0; 8]);
@@ -1486,10 +1550,11 @@ impl MeshData {
                     while m != 0 {
                         let k = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let r = WoopRay::new(o, d[k]);
+                        let r = WoopRay::on(o, d[k], line(k));
                         for a in 0..3 {
                             shear[a].0[k] = r.s[a];
                         }
+                        (k10[0].0[k], k10[1].0[k]) = (r.k1, r.k0);
                         // Compared as one small code: comparing the arrays loaded
                         // them back wider than they were just stored (a
                         // store-forwarding stall, ~5% of this walk's samples).
@@ -1513,7 +1578,7 @@ impl MeshData {
                     let ok = o.to_array();
                     let cut8 = wide::F8(cut);
                     // SAFETY: AVX is only true in `spans_nearest8_avx`, compiled with AVX.
-                    let b = unsafe { blk.test8_avx(axes, [ok[axes[0]], ok[axes[1]], ok[axes[2]]], &shear, &tlo8, &cut8) };
+                    let b = unsafe { blk.test8_avx(axes, [ok[axes[0]], ok[axes[1]], ok[axes[2]]], &shear, &k10, (&tlo8, &cut8)) };
                     // Each ray's crossings in the order of `block_crossings`:
                     // the certain hits lane by lane, then the undecided lanes.
                     for l in 0..blk.slots().len() {
@@ -1587,8 +1652,12 @@ impl MeshData {
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
+            // No crossing, no span (the count at tmin is zero).
+            if xs[k].is_empty() {
+                continue;
+            }
             self.sort_signed(&mut xs[k]);
-            self.walk_signed(&xs[k], 0, Walk { o, d: d[k], tmin: tmin[k], tmax: cut[k].min(tmax[k]), leaf }, &mut out[k]);
+            self.walk_signed(&xs[k], 0, Walk::new(line(k), tmin[k], cut[k].min(tmax[k]), leaf), &mut out[k]);
         }
         (active, cut)
     }
@@ -1624,7 +1693,9 @@ impl MeshData {
                 // (they are handled either way).
                 let d = Vec3::new(0.5773503, 0.5773491, 0.5773515);
                 let mut count = 0.0f32;
-                self.for_each_crossing(p, d, 0.0, f32::INFINITY, |c| count -= if c.front { self.orient } else { -self.orient });
+                self.for_each_crossing((p, d, Line64::of(p, d)), 0.0, f32::INFINITY, |c| {
+                    count -= if c.front { self.orient } else { -self.orient }
+                });
                 count > 0.5
             }
             InsideRule::Winding => self.winding_number(p) >= 0.5,

@@ -692,7 +692,7 @@ fn mesh_spans_nearest8_matches_single_rays() {
             let slack: [f32; 8] = std::array::from_fn(|k| if k == 2 { 0.0 } else { 1e-4 * k as f32 });
             let active = if i % 13 == 0 { 0b1011_0110 } else { 0xff };
             let mut out: [Vec<Span>; 8] = Default::default();
-            let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack, through: &NO_THROUGH };
+            let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack, through: &NO_THROUGH, exact: None };
             let (done, cut) = m.spans_nearest8(&q, active, 7, &mut out);
             assert_eq!(done & !active, 0, "{name}: bundle {i}: a ray outside the active set was traced");
             // The SSE2 walk (machines without AVX: every leaf ray by ray) agrees exactly.

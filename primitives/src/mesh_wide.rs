@@ -249,6 +249,7 @@ pub(super) struct TriRay4 {
     /// The origin in the axis order `k`, and the shears `sx`, `sy` (for the bound).
     os: [f32; 3],
     sxy: [f32; 2],
+    k10: (f32, f32),
 }
 
 impl TriRay4 {
@@ -261,6 +262,7 @@ impl TriRay4 {
             s: r.s.map(Vec4::splat),
             os: [r.o[kx], r.o[ky], r.o[kz]],
             sxy: [r.s[0], r.s[1]],
+            k10: (r.k1, r.k0),
         }
     }
 }
@@ -296,6 +298,12 @@ pub(super) enum Near {
 
 /// The unit roundoff of f32.
 const U: f32 = f32::EPSILON * 0.5;
+/// The error bound's coefficients ([`TriBlock::bound`]) for an exact f32
+/// ray, and for one that rounds an exact line (with `K0_ROUNDED` times the
+/// origin's largest coordinate).
+pub(super) const K1: f32 = 34.0 * U;
+pub(super) const K1_ROUNDED: f32 = 48.0 * U;
+pub(super) const K0_ROUNDED: f32 = 12.0 * U;
 
 /// A ball around every corner of `tris`: the centre of their box and a radius
 /// rounded up, `[x, y, z, r]`.
@@ -359,19 +367,22 @@ impl TriBlock {
     /// difference), and lies within P = |projected q|_inf + 2r of the ray
     /// (|sx|, |sy| <= 1). An edge function, a difference of two products of
     /// such coordinates, is then off by at most u P' (24.4 M + 4 P') with P'
-    /// = P + 18.3 u M <= 2.0001 M: at most 32.5 u M P'. 34 leaves a margin
-    /// for the rounding of the bound itself. [`test8_avx`](Self::test8_avx)
-    /// makes the same bits.
+    /// = P + 18.3 u M <= 2.0001 M: at most 32.5 u M P'; with `k1` = [`K1`]
+    /// (34 u) and `k0` = 0 the bound is (k1 M + k0) P'. Where the f32 ray
+    /// is a rounding of the exact line ([`super::Line64`]), each projected
+    /// corner moves by up to 2 u |o|_inf more (the origin) and 2.01 u M (the
+    /// shears): `k1` = [`K1_ROUNDED`], `k0` = [`K0_ROUNDED`] |o|_inf, also
+    /// added to P'. [`test8_avx`](Self::test8_avx) makes the same bits.
     #[inline(always)]
-    pub(super) fn bound(&self, k: [usize; 3], o: [f32; 3], sx: f32, sy: f32) -> f32 {
+    pub(super) fn bound(&self, k: [usize; 3], o: [f32; 3], (sx, sy): (f32, f32), (k1, k0): (f32, f32)) -> f32 {
         let q = &self.ball;
         let (qx, qy, qz) = (q[k[0]] - o[0], q[k[1]] - o[1], q[k[2]] - o[2]);
         let m = qx.abs().max(qy.abs()).max(qz.abs()) + q[3];
         let px = qx - sx * qz;
         let py = qy - sy * qz;
-        let p = px.abs().max(py.abs()) + (q[3] + q[3] + m * (20.0 * U));
+        let p = px.abs().max(py.abs()) + (q[3] + q[3] + m * (20.0 * U) + k0);
         // Below the smallest normal f32 the products lose their relative precision.
-        (m * (34.0 * U) * p).max(f32::MIN_POSITIVE)
+        ((m * k1 + k0) * p).max(f32::MIN_POSITIVE)
     }
 
     /// The watertight test on the four lanes, within `[tlo, thi]`.
@@ -391,7 +402,7 @@ impl TriBlock {
         let u = cx * by - cy * bx;
         let vv = ax * cy - ay * cx;
         let w = bx * ay - by * ax;
-        let b = Vec4::splat(self.bound(r.k, r.os, r.sxy[0], r.sxy[1]));
+        let b = Vec4::splat(self.bound(r.k, r.os, (r.sxy[0], r.sxy[1]), r.k10));
         let nb = -b;
         // Certain: a miss where two edge functions have opposite signs, a hit
         // where all three share theirs (padding lanes are masked off).
@@ -418,7 +429,7 @@ impl TriBlock {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     #[inline]
-    pub(super) fn test8_avx(&self, k: [usize; 3], o: [f32; 3], s: &[F8; 3], tlo: &F8, thi: &F8) -> Block8 {
+    pub(super) fn test8_avx(&self, k: [usize; 3], o: [f32; 3], s: &[F8; 3], k10: &[F8; 2], (tlo, thi): (&F8, &F8)) -> Block8 {
         use std::arch::x86_64::*;
         let [kx, ky, kz] = k;
         let [ox, oy, oz] = o;
@@ -432,8 +443,9 @@ impl TriBlock {
         let sign = _mm256_set1_ps(-0.0);
         let px = _mm256_andnot_ps(sign, _mm256_sub_ps(_mm256_set1_ps(qx), _mm256_mul_ps(sx, _mm256_set1_ps(qz))));
         let py = _mm256_andnot_ps(sign, _mm256_sub_ps(_mm256_set1_ps(qy), _mm256_mul_ps(sy, _mm256_set1_ps(qz))));
-        let p = _mm256_add_ps(_mm256_max_ps(px, py), _mm256_set1_ps(q[3] + q[3] + m * (20.0 * U)));
-        let b = _mm256_mul_ps(_mm256_set1_ps(m * (34.0 * U)), p);
+        let (k1, k0) = (F8::load(&k10[0]), F8::load(&k10[1]));
+        let p = _mm256_add_ps(_mm256_max_ps(px, py), _mm256_add_ps(_mm256_set1_ps(q[3] + q[3] + m * (20.0 * U)), k0));
+        let b = _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(m), k1), k0), p);
         let b = _mm256_max_ps(b, _mm256_set1_ps(f32::MIN_POSITIVE));
         let nb = _mm256_xor_ps(b, sign);
         let n = (self.count as usize).min(4);
