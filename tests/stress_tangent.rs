@@ -27,6 +27,10 @@ pub(crate) struct Family {
     pub(crate) near: DVec3,
     pub(crate) size: f64,
     pub(crate) aim: Box<dyn Fn(&mut SmallRng) -> Aim>,
+    /// Does the f32 ray (origin, direction) lie exactly in the plane of a
+    /// flat face? Its contact with the solid is then only that face, which
+    /// the model may count as a chord or as nothing by its own rounding.
+    pub(crate) in_plane: Option<Box<dyn Fn(DVec3, DVec3) -> bool>>,
 }
 
 pub(crate) fn unit(rng: &mut SmallRng) -> DVec3 {
@@ -68,7 +72,7 @@ fn ellipsoid(name: &'static str, m: DAffine3, wrap: &dyn Fn(Shape) -> Shape, s: 
         let p = m.transform_point3(lc + n * lr);
         (p, across(rng, (nt * n).normalize()))
     };
-    Family { name, shape, near: rv(m.translation), size: 2.0 * s, aim: Box::new(aim) }
+    Family { name, shape, near: rv(m.translation), size: 2.0 * s, aim: Box::new(aim), in_plane: None }
 }
 
 /// A cone (or cylinder: `ra == rb`) from `a` to `b`.
@@ -150,7 +154,14 @@ fn families(c: DVec3, s: f64) -> Vec<Family> {
     let cyl = Axial { a: p(-0.6, -0.3, 0.2), b: p(0.5, 0.4, -0.3), ra: r32(0.35 * s), rb: r32(0.35 * s) };
     let cone = Axial { a: p(-0.2, -0.7, 0.1), b: p(0.3, 0.6, -0.2), ra: r32(0.55 * s), rb: 0.0 };
     let frustum = Axial { a: p(0.4, -0.5, -0.3), b: p(-0.3, 0.5, 0.4), ra: r32(0.5 * s), rb: r32(0.2 * s) };
-    let fam = |name, x: Axial, aim: Box<dyn Fn(&mut SmallRng) -> Aim>| Family { name, shape: x.shape(), near: x.a, size: 1.5 * s, aim };
+    let fam = |name, x: Axial, aim: Box<dyn Fn(&mut SmallRng) -> Aim>| Family {
+        name,
+        shape: x.shape(),
+        near: x.a,
+        size: 1.5 * s,
+        aim,
+        in_plane: None,
+    };
     vec![
         ellipsoid("ellipsoid (scale 1.7, 0.6, 1.1)", m, &scaled, s),
         ellipsoid("ellipsoid (sheared matrix)", outer * inner, &sheared, s),
@@ -177,7 +188,8 @@ pub(crate) struct Tally {
     /// Rays set aside: they lie in a cap's plane to within the model's own
     /// f64 rounding, which then reports many spans of a convex solid (a cap
     /// plane with a small integer normal through f32 points holds ~1 in 300
-    /// f32 rays exactly; the engine reports the boundary-inclusive chord).
+    /// f32 rays exactly; the engine reports the boundary-inclusive chord),
+    /// or exactly in a face's plane (`Family::in_plane`).
     pub(crate) in_plane: usize,
 }
 
@@ -213,7 +225,7 @@ pub(crate) fn tally(fam: &Family, s: f64, seed: u64) -> Tally {
         let mut extra: Vec<f64> = spans.iter().map(|s| 0.5 * (s.t0 as f64 + s.t1 as f64)).collect();
         extra.push(tp);
         let want = model_crossings(&f, o - fam.near, d, (w0, w1), 1000, &extra);
-        if want.len() > 2 {
+        if want.len() > 2 || fam.in_plane.as_ref().is_some_and(|f| f(o, d)) {
             t.in_plane += 1;
             continue;
         }

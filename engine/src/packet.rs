@@ -404,7 +404,7 @@ impl RenderScene {
             }
         }
         ps.memo.clear();
-        let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack, through: &through };
+        let q = NearestRays8 { o, d: &d, tmin: &tmin, tmax: &tmax, slack: &slack, through: &through, exact: None };
         for &i in &self.packet_meshes {
             ps.memo.add(i, &tmin, &tmax, |sp| self.leaves.mesh_nearest8(i, &q, 0xff, sp));
         }

@@ -26,6 +26,10 @@
 //! infinitesimal `(-1, eps)` in the projected plane (the rasterizer's top-left
 //! rule). So exactly one of the triangles that tile a neighbourhood of an edge or
 //! vertex reports the crossing: rays never leak through, nor count a crossing twice.
+//! The test runs in f32 where its decision is certain (every edge function is
+//! compared with a bound of its rounding error) and in f64 for the few
+//! triangles where it is not (see [`intersect64`]): decisions that are certain
+//! are the exact ones, so the two kinds stay watertight together.
 
 use crate::{Ray, Span};
 use std::collections::HashMap;
@@ -228,11 +232,44 @@ struct Crossing {
 /// ray, the range it clips to and the leaf id its surfaces carry.
 #[derive(Clone, Copy)]
 struct Walk {
-    o: Vec3,
-    d: Vec3,
+    /// The exact line (`refine` works on it).
+    x: Line64,
+    /// 0 where the f32 ray is the line, else its origin's largest
+    /// coordinate (how far the rounding may have moved the f32 ray).
+    far: f64,
     tmin: f32,
     tmax: f32,
     leaf: u32,
+}
+
+/// The exact line of a ray in the mesh's frame, `o + t d` in f64: the f32
+/// ray the walks trace is this line rounded (a mesh under a transform is
+/// given its rays through an f64 map, rounded once).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line64 {
+    /// Origin.
+    pub o: DVec3,
+    /// Direction.
+    pub d: DVec3,
+    /// The f32 ray traced may be a rounding of this line (else it is the
+    /// line itself).
+    pub rounded: bool,
+}
+
+impl Line64 {
+    /// The line of an f32 ray (exact).
+    #[inline(always)]
+    pub fn of(o: Vec3, d: Vec3) -> Line64 {
+        Line64 { o: o.as_dvec3(), d: d.as_dvec3(), rounded: false }
+    }
+}
+
+impl Walk {
+    #[inline(always)]
+    fn new(x: Line64, tmin: f32, tmax: f32, leaf: u32) -> Walk {
+        let far = if x.rounded { x.o.abs().max_element() } else { 0.0 };
+        Walk { x, far, tmin, tmax, leaf }
+    }
 }
 
 /// Per-ray constants of the watertight test.
@@ -241,11 +278,23 @@ struct WoopRay {
     o: Vec3,
     k: [usize; 3],
     s: [f32; 3],
+    /// The exact line (the f64 test's and `refine`'s).
+    x: Line64,
+    /// The error bound's coefficients ([`wide::TriBlock::bound`]): larger
+    /// where the f32 ray is a rounding of `x`.
+    k1: f32,
+    k0: f32,
 }
 
 impl WoopRay {
     #[inline(always)]
     fn new(o: Vec3, d: Vec3) -> WoopRay {
+        WoopRay::on(o, d, Line64::of(o, d))
+    }
+
+    /// The constants of the f32 ray `(o, d)`, a rounding of the line `x`.
+    #[inline(always)]
+    fn on(o: Vec3, d: Vec3, x: Line64) -> WoopRay {
         let a = d.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
             0
@@ -260,7 +309,10 @@ impl WoopRay {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        WoopRay { o, k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]] }
+        // A rounded ray moves each projected corner by up to 2 u |o|_inf
+        // (the origin) and 2 u M (the shears): see `TriBlock::bound`.
+        let (k1, k0) = if x.rounded { (wide::K1_ROUNDED, wide::K0_ROUNDED * o.abs().max_element()) } else { (wide::K1, 0.0) };
+        WoopRay { o, k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]], x, k1, k0 }
     }
 }
 
@@ -282,6 +334,10 @@ pub struct NearestRays8<'a> {
     /// collecting up to `b` (a CSG difference whose subtrahend covers `[a, b]`
     /// needs the crossings up to where it ends); empty (`a > b`) for none.
     pub through: &'a [[f32; 2]; 8],
+    /// The exact lines the f32 rays round (common origin, directions), for
+    /// a mesh under a transform (see [`MeshData::spans_on`]); `None`: the
+    /// f32 rays are exact.
+    pub exact: Option<(DVec3, &'a [DVec3; 8])>,
 }
 
 /// No [`NearestRays8::through`] intervals.
@@ -398,49 +454,64 @@ impl RayBox {
 /// triangle's determinant (its interior is to the left of the edge when `det < 0`).
 /// Equivalent to shifting the point by an infinitesimal `(-1, eps)`.
 #[inline(always)]
-fn owns_edge(dx: f32, dy: f32, det: f32) -> bool {
+fn owns_edge(dx: f64, dy: f64, det: f64) -> bool {
     let upward = dy > 0.0 || (dy == 0.0 && dx > 0.0);
     upward == (det < 0.0)
 }
 
-/// Watertight ray/triangle test (Woop, Benthin, Wald 2013) with exact tie-breaking
-/// on edges and vertices. Returns `(t, det > 0)` for `t` in `[tlo, thi]`.
-#[inline(always)]
+/// Watertight ray/triangle test (Woop, Benthin, Wald 2013) as the mesh
+/// walks make it, for one triangle: the f32 test where its decision is
+/// certain (see [`wide::TriBlock::bound`]; `ball` bounds the corners of the
+/// triangle's block), else [`intersect64`]. Returns `(t, det > 0)` for `t`
+/// in `[tlo, thi]`. The same bits as the lane of the block test.
+#[inline]
+fn intersect_in(r: &WoopRay, tri: &[Vec3; 3], ball: [f32; 4], tlo: f32, thi: f32) -> Option<(f32, bool)> {
+    let blk = wide::TriBlock::single(tri, ball);
+    let b = blk.test(&wide::TriRay4::new(r), tlo, thi);
+    if b.unsure != 0 {
+        return intersect64(r, tri, tlo, thi);
+    }
+    (b.hits != 0).then(|| (b.t.x, b.det.x > 0.0))
+}
+
+/// [`intersect_in`] for a triangle alone (its own ball).
+#[cfg(test)]
 fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, bool)> {
+    intersect_in(r, tri, wide::block_ball(std::slice::from_ref(tri)), tlo, thi)
+}
+
+/// The watertight test in f64, for the triangles the f32 test cannot
+/// decide: a ray that passes within that test's resolution (~1e-6 of its
+/// distance) of an edge line, or runs nearly in a face's plane (the f32
+/// decisions there made whole spans appear or vanish: tests/stress_grazing.rs).
+/// The corners relative to the origin are exact in f64; the shear, edge
+/// functions and t are rounded to f64, the same way for every triangle that
+/// shares an edge, so the decisions stay watertight among themselves, and
+/// exact zeros are resolved by the tie-breaking rule. Its decisions agree
+/// with the f32 test's certain ones (those hold by a margin of ~1e-6 of the
+/// distance, this test's error is ~1e-15 of it).
+#[inline(never)]
+fn intersect64(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, bool)> {
     let [kx, ky, kz] = r.k;
-    let [sx, sy, sz] = r.s;
-    let a = (tri[0] - r.o).to_array();
-    let b = (tri[1] - r.o).to_array();
-    let c = (tri[2] - r.o).to_array();
+    let (o, d) = (r.x.o, r.x.d);
+    let (sx, sy) = (d[kx] / d[kz], d[ky] / d[kz]);
+    let a = tri[0].as_dvec3() - o;
+    let b = tri[1].as_dvec3() - o;
+    let c = tri[2].as_dvec3() - o;
     let ax = a[kx] - sx * a[kz];
     let ay = a[ky] - sy * a[kz];
     let bx = b[kx] - sx * b[kz];
     let by = b[ky] - sy * b[kz];
     let cx = c[kx] - sx * c[kz];
     let cy = c[ky] - sy * c[kz];
-    let mut u = cx * by - cy * bx;
-    let mut v = ax * cy - ay * cx;
-    let mut w = bx * ay - by * ax;
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        // Products of f32 are exact in f64, so these signs are exact.
-        let f = |p: f32, q: f32, r: f32, s: f32| {
-            let x = p as f64 * q as f64 - r as f64 * s as f64;
-            let y = x as f32;
-            if y == 0.0 && x != 0.0 {
-                f32::MIN_POSITIVE.copysign(x.signum() as f32)
-            } else {
-                y
-            }
-        };
-        u = f(cx, by, cy, bx);
-        v = f(ax, cy, ay, cx);
-        w = f(bx, ay, by, ax);
-    }
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
     if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
         return None;
     }
     let det = u + v + w;
-    if det == 0.0 {
+    if det == 0.0 || !det.is_finite() {
         return None;
     }
     if (u == 0.0 && !owns_edge(cx - bx, cy - by, det))
@@ -449,10 +520,7 @@ fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, b
     {
         return None;
     }
-    let az = sz * a[kz];
-    let bz = sz * b[kz];
-    let cz = sz * c[kz];
-    let t = (u * az + v * bz + w * cz) / det;
+    let t = ((u * a[kz] + v * b[kz] + w * c[kz]) / (det * d[kz])) as f32;
     if t >= tlo && t <= thi {
         Some((t, det > 0.0))
     } else {
@@ -762,43 +830,73 @@ impl MeshData {
 
     /// Calls `f` for every triangle crossing in `[tlo, thi]`, in no particular order.
     #[inline]
-    fn for_each_crossing(&self, o: Vec3, d: Vec3, tlo: f32, thi: f32, mut f: impl FnMut(Crossing)) {
+    fn for_each_crossing(&self, (o, d, x): (Vec3, Vec3, Line64), tlo: f32, thi: f32, mut f: impl FnMut(Crossing)) {
         if self.wide.is_empty() {
             return;
         }
-        let r = WoopRay::new(o, d);
+        let r = WoopRay::on(o, d, x);
         let r4 = wide::TriRay4::new(&r);
         let rb = wide::Ray4::new(o, d);
-        // All hits: no ordering, no pruning.
-        let mut stack: SmallVec<[u32; 64]> = SmallVec::new();
-        stack.push(0);
-        while let Some(c) = stack.pop() {
-            if c & wide::LEAF != 0 {
-                let blk = self.wide.block(c);
-                match blk.test(&r4, tlo, thi) {
-                    wide::Block::Hits(mut m, t, det) => {
-                        while m != 0 {
-                            let l = m.trailing_zeros();
-                            m &= m - 1;
-                            f(Crossing { t: t[l as usize], slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
+        // All hits: no ordering, no pruning. A plain array for the stack
+        // (SmallVec's checks on every push and pop were ~3% of the lit
+        // bunny's and mesh_mold's instructions, callgrind), spilling to the heap only for a
+        // tree deeper than it holds; the child met last is visited at once
+        // (the order a push of every child then a pop gives).
+        let mut stack = [0u32; STACK];
+        let mut sp = 0usize;
+        let mut spill: Vec<u32> = Vec::new();
+        let mut cur = 0u32;
+        loop {
+            if cur & wide::LEAF != 0 {
+                let blk = self.wide.block(cur);
+                let b = blk.test(&r4, tlo, thi);
+                self.block_crossings(blk, &b, &r, (tlo, thi), &mut f);
+            } else {
+                let n = self.wide.node(cur);
+                let (mut m, _) = rb.hit(n, tlo, thi);
+                if m != 0 {
+                    while m & (m - 1) != 0 {
+                        let c = n.child(m.trailing_zeros());
+                        m &= m - 1;
+                        if sp < STACK {
+                            stack[sp] = c;
+                            sp += 1;
+                        } else {
+                            spill.push(c);
                         }
                     }
-                    wide::Block::Exact => {
-                        for slot in blk.slots() {
-                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, &r, tlo, thi) {
-                                f(Crossing { t, slot, front });
-                            }
-                        }
-                    }
+                    cur = n.child(m.trailing_zeros());
+                    continue;
                 }
-                continue;
             }
-            let n = self.wide.node(c);
-            let (mut m, _) = rb.hit(n, tlo, thi);
-            while m != 0 {
-                let s = m.trailing_zeros();
-                m &= m - 1;
-                stack.push(n.child(s));
+            if sp > 0 {
+                sp -= 1;
+                cur = stack[sp];
+            } else if let Some(c) = spill.pop() {
+                cur = c;
+            } else {
+                return;
+            }
+        }
+    }
+
+    /// The crossings of one block test `b` (of `blk`, for the ray `r` on
+    /// `[tlo, thi]`): the certain hits lane by lane, then the f64 test's
+    /// answers for the undecided lanes (the order every walk keeps).
+    #[inline(always)]
+    fn block_crossings(&self, blk: &wide::TriBlock, b: &wide::Block, r: &WoopRay, (tlo, thi): (f32, f32), f: &mut impl FnMut(Crossing)) {
+        let mut m = b.hits;
+        while m != 0 {
+            let l = m.trailing_zeros();
+            m &= m - 1;
+            f(Crossing { t: b.t[l as usize], slot: blk.slots().start + l, front: b.det[l as usize] > 0.0 });
+        }
+        let mut m = b.unsure;
+        while m != 0 {
+            let slot = blk.slots().start + m.trailing_zeros();
+            m &= m - 1;
+            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tlo, thi) {
+                f(Crossing { t, slot, front });
             }
         }
     }
@@ -808,7 +906,7 @@ impl MeshData {
     /// points against the ray. For tests and diagnostics (allocates).
     pub fn crossings(&self, o: Vec3, d: Vec3, tlo: f32, thi: f32) -> Vec<(f32, u32, i32)> {
         let mut v = Vec::new();
-        self.for_each_crossing(o, d, tlo, thi, |c| v.push((c.t, c.slot, if c.front { 1 } else { -1 })));
+        self.for_each_crossing((o, d, Line64::of(o, d)), tlo, thi, |c| v.push((c.t, c.slot, if c.front { 1 } else { -1 })));
         // Entering first on ties (a ray grazing an edge touches it in and out at one t).
         v.sort_by(|a, b| a.0.total_cmp(&b.0).then(b.2.cmp(&a.2)));
         v
@@ -875,13 +973,16 @@ impl MeshData {
                     *best = Some((t, blk.slots().start + l));
                 }
             }
-            wide::Near::Exact => {
-                for slot in blk.slots() {
-                    if let Some((t, _)) = wide::TriBlock::exact(&self.tris, slot, r, tmin, *thi) {
-                        *best = Some((t, slot));
-                        *thi = t;
+            wide::Near::Unsure(b) => {
+                // The lanes in order, on the range the block was tested on:
+                // the nearest, the last of equals (as `Hit`).
+                let t0 = *thi;
+                self.block_crossings(blk, &b, r, (tmin, t0), &mut |c: Crossing| {
+                    if c.t <= *thi {
+                        *thi = c.t;
+                        *best = Some((c.t, c.slot));
                     }
-                }
+                });
             }
         }
     }
@@ -901,10 +1002,15 @@ impl MeshData {
         let mut best: Option<(f32, u32)> = None;
         let mut thi = tmax;
         let mut leaf = |n: &BvhNode, thi: &mut f32| {
+            // The ball of the leaf's block (the same leaves: see `wide::Wide::build`).
+            let ball = wide::block_ball(&self.tris[n.first as usize..(n.first + n.count) as usize]);
+            let t0 = *thi;
             for slot in n.first..n.first + n.count {
-                if let Some((t, _)) = intersect(&r, &self.tris[slot as usize], tmin, *thi) {
-                    best = Some((t, slot));
-                    *thi = t;
+                if let Some((t, _)) = intersect_in(&r, &self.tris[slot as usize], ball, tmin, t0) {
+                    if t <= *thi {
+                        best = Some((t, slot));
+                        *thi = t;
+                    }
                 }
             }
         };
@@ -1076,6 +1182,12 @@ impl MeshData {
     /// carry `Surf { leaf, sub }` with `sub` = triangle slot, `| SUB_FLIP` when the
     /// triangle faces inward there.
     pub fn spans<S: SpanSink + ?Sized>(&self, ray: &Ray, leaf: u32, out: &mut S) {
+        self.spans_on(ray, Line64::of(ray.origin, ray.dir), leaf, out)
+    }
+
+    /// [`MeshData::spans`] of the f32 ray `ray`, a rounding of the exact line
+    /// `x`: the crossings are decided and the ends refined for `x`.
+    pub fn spans_on<S: SpanSink + ?Sized>(&self, ray: &Ray, x: Line64, leaf: u32, out: &mut S) {
         let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         if !(tmax >= tmin) {
             return;
@@ -1085,24 +1197,24 @@ impl MeshData {
             InsideRule::Orientation => {
                 if self.outside_at(o, d, tmin) {
                     // The count at tmin is zero: only the crossings up to tmax matter.
-                    self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
+                    self.for_each_crossing((o, d, x), tmin, tmax, |c| xs.push(c));
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, Walk { o, d, tmin, tmax, leaf }, out);
+                    self.walk_signed(&xs, 0, Walk::new(x, tmin, tmax, leaf), out);
                     return;
                 }
                 // Collect to the box exit: the crossings past tmax tell how deep inside
                 // the ray is at tmin (the signed count over the whole line is zero).
-                self.for_each_crossing(o, d, tmin, f32::INFINITY, |c| xs.push(c));
+                self.for_each_crossing((o, d, x), tmin, f32::INFINITY, |c| xs.push(c));
                 self.sort_signed(&mut xs);
                 let count: i32 = xs.iter().map(|c| -self.sign(c)).sum();
-                self.walk_signed(&xs, count, Walk { o, d, tmin, tmax, leaf }, out);
+                self.walk_signed(&xs, count, Walk::new(x, tmin, tmax, leaf), out);
             }
             InsideRule::Winding => {
                 let Some(&root) = self.bvh.nodes.first() else { return };
                 let Some((lo, hi)) = RayBox::new(o, d).range(&root, tmin, tmax) else { return };
                 // [tmin, tmax], not [lo, hi]: the box's slab parameters and a triangle's t
                 // round differently; pieces outside [lo, hi] are empty.
-                self.for_each_crossing(o, d, tmin, tmax, |c| xs.push(c));
+                self.for_each_crossing((o, d, x), tmin, tmax, |c| xs.push(c));
                 sort_crossings(&mut xs, |_| true);
                 let end_surf = |t: f32, clip: f32| {
                     if t == clip {
@@ -1113,7 +1225,7 @@ impl MeshData {
                 };
                 // Walk the pieces between consecutive crossings (decided by
                 // the f32 t; the ends pushed refined as `walk_signed`'s).
-                let w = Walk { o, d, tmin, tmax, leaf };
+                let w = Walk::new(x, tmin, tmax, leaf);
                 let mut floor = tmin;
                 let mut inside = false;
                 let mut start = (lo, end_surf(lo, tmin));
@@ -1209,17 +1321,18 @@ impl MeshData {
     #[inline]
     fn refine(&self, c: &Crossing, w: &Walk, lo: f32) -> f32 {
         let [a, b, e] = self.tris[c.slot as usize].map(|v| v.as_dvec3());
-        let (n, dd) = ((b - a).cross(e - a), w.d.as_dvec3());
+        let (n, dd) = ((b - a).cross(e - a), w.x.d);
         let den = n.dot(dd);
-        let ao = a - w.o.as_dvec3();
+        let ao = a - w.x.o;
         // No further than the f32 test itself may be off (8 f32 epsilons of
-        // the vertex's distance from the origin, stretched by 1 / sin), nor
-        // than the triangle's size along the ray: where the ray runs so close
-        // to the plane that the test's choice of triangle is itself rounding,
-        // the plane's crossing may lie far off the triangle.
+        // the vertex's distance from the origin, and of the origin's own
+        // size where the f32 ray is a rounding of the line, stretched by 1 /
+        // sin), nor than the triangle's size along the ray: where the ray
+        // runs so close to the plane that the test's choice of triangle is
+        // itself rounding, the plane's crossing may lie far off the triangle.
         let size = (b - a).abs().max((e - a).abs()).max_element();
-        let tol =
-            ((8.0 * f32::EPSILON as f64) * ao.abs().max_element() * n.abs().element_sum() / den.abs()).min(size / dd.abs().max_element());
+        let reach = ao.abs().max_element() + w.far;
+        let tol = ((8.0 * f32::EPSILON as f64) * reach * n.abs().element_sum() / den.abs()).min(size / dd.abs().max_element());
         let t = n.dot(ao) / den;
         // (max / min, not clamp: no panic whatever the bounds.)
         let t = if t.is_finite() { t.max(c.t as f64 - tol).min(c.t as f64 + tol) as f32 } else { c.t };
@@ -1237,15 +1350,21 @@ impl MeshData {
     /// the full query (returning infinity) where the count at `tmin` is not known
     /// to be zero (the point at `tmin` inside the bounds) or for the winding rule.
     pub fn spans_nearest<S: SpanSink + ?Sized>(&self, ray: &Ray, slack: f32, leaf: u32, out: &mut S) -> f32 {
+        self.spans_nearest_on(ray, Line64::of(ray.origin, ray.dir), slack, leaf, out)
+    }
+
+    /// [`MeshData::spans_nearest`] of the f32 ray `ray`, a rounding of the
+    /// exact line `x` (as [`MeshData::spans_on`]).
+    pub fn spans_nearest_on<S: SpanSink + ?Sized>(&self, ray: &Ray, x: Line64, slack: f32, leaf: u32, out: &mut S) -> f32 {
         let Ray { origin: o, dir: d, tmin, tmax, .. } = *ray;
         if !(tmax >= tmin) || self.wide.is_empty() {
             return f32::INFINITY;
         }
         if self.rule != InsideRule::Orientation || !self.outside_at(o, d, tmin) {
-            self.spans(ray, leaf, out);
+            self.spans_on(ray, x, leaf, out);
             return f32::INFINITY;
         }
-        let r = WoopRay::new(o, d);
+        let r = WoopRay::on(o, d, x);
         let r4 = wide::TriRay4::new(&r);
         let rb = wide::Ray4::new(o, d);
         let mut xs: SmallVec<[Crossing; 32]> = SmallVec::new();
@@ -1256,25 +1375,11 @@ impl MeshData {
         loop {
             if cur & wide::LEAF != 0 {
                 let blk = self.wide.block(cur);
-                match blk.test(&r4, tmin, cut) {
-                    wide::Block::Hits(mut m, t, det) => {
-                        while m != 0 {
-                            let l = m.trailing_zeros();
-                            m &= m - 1;
-                            let t = t[l as usize];
-                            xs.push(Crossing { t, slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
-                            cut = cut.min((t + slack).max(t.next_up()));
-                        }
-                    }
-                    wide::Block::Exact => {
-                        for slot in blk.slots() {
-                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, &r, tmin, cut) {
-                                xs.push(Crossing { t, slot, front });
-                                cut = cut.min((t + slack).max(t.next_up()));
-                            }
-                        }
-                    }
-                }
+                let b = blk.test(&r4, tmin, cut);
+                self.block_crossings(blk, &b, &r, (tmin, cut), &mut |c: Crossing| {
+                    xs.push(c);
+                    cut = cut.min((c.t + slack).max(c.t.next_up()));
+                });
             } else {
                 let n = self.wide.node(cur);
                 let (m, tn) = rb.hit(n, tmin, cut);
@@ -1286,7 +1391,7 @@ impl MeshData {
                         }
                         Err(()) => {
                             // A degenerate tree deeper than the stack: the unpruned walk.
-                            self.spans(ray, leaf, out);
+                            self.spans_on(ray, x, leaf, out);
                             return f32::INFINITY;
                         }
                     }
@@ -1298,7 +1403,7 @@ impl MeshData {
                     // Crossings found before `cut` shrank may lie past it: not all
                     // of their neighbours were seen.
                     self.sort_signed(&mut xs);
-                    self.walk_signed(&xs, 0, Walk { o, d, tmin, tmax: cut.min(tmax), leaf }, out);
+                    self.walk_signed(&xs, 0, Walk::new(x, tmin, cut.min(tmax), leaf), out);
                     return cut;
                 }
             }
@@ -1354,7 +1459,8 @@ impl MeshData {
         leaf: u32,
         out: &mut [Vec<Span>; 8],
     ) -> (u32, [f32; 8]) {
-        let NearestRays8 { o, d, tmin, tmax, slack, through } = *q;
+        let NearestRays8 { o, d, tmin, tmax, slack, through, exact } = *q;
+        let line = |k: usize| exact.map_or(Line64::of(o, d[k]), |(xo, xd)| Line64 { o: xo, d: xd[k], rounded: true });
         // Where ray `k`'s walk may stop once it has met a crossing at `t`.
         let stop = |k: usize, t: f32| {
             let c = (t + slack[k]).max(t.next_up());
@@ -1415,6 +1521,7 @@ impl MeshData {
         // axis, whether they share the projection axes `axes`, their starts.
         let mut ready = 0u32;
         let mut shear = [wide::F8([0.0; 8]); 3];
+        let mut k10 = [wide::F8([0.0; 8]); 2];
         let mut shared = true;
         let mut axes = [0usize, 1, 2];
         let mut tlo8 = wide::F8([0.0; 8]);
@@ -1443,10 +1550,11 @@ impl MeshData {
                     while m != 0 {
                         let k = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let r = WoopRay::new(o, d[k]);
+                        let r = WoopRay::on(o, d[k], line(k));
                         for a in 0..3 {
                             shear[a].0[k] = r.s[a];
                         }
+                        (k10[0].0[k], k10[1].0[k]) = (r.k1, r.k0);
                         // Compared as one small code: comparing the arrays loaded
                         // them back wider than they were just stored (a
                         // store-forwarding stall, ~5% of this walk's samples).
@@ -1470,24 +1578,11 @@ impl MeshData {
                     let ok = o.to_array();
                     let cut8 = wide::F8(cut);
                     // SAFETY: AVX is only true in `spans_nearest8_avx`, compiled with AVX.
-                    let b = unsafe { blk.test8_avx(axes, [ok[axes[0]], ok[axes[1]], ok[axes[2]]], &shear, &tlo8, &cut8) };
-                    let exact = b.inside_any & b.zero_any & need;
-                    let mut mm = exact;
-                    while mm != 0 {
-                        let k = mm.trailing_zeros() as usize;
-                        mm &= mm - 1;
-                        // SAFETY: every active lane was written on the first leaf.
-                        let r = unsafe { rays[k].assume_init_ref() };
-                        for slot in blk.slots() {
-                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
-                                xs[k].push(Crossing { t, slot, front });
-                                cut[k] = cut[k].min(stop(k, t));
-                                shrunk = true;
-                            }
-                        }
-                    }
+                    let b = unsafe { blk.test8_avx(axes, [ok[axes[0]], ok[axes[1]], ok[axes[2]]], &shear, &k10, (&tlo8, &cut8)) };
+                    // Each ray's crossings in the order of `block_crossings`:
+                    // the certain hits lane by lane, then the undecided lanes.
                     for l in 0..blk.slots().len() {
-                        let mut m = b.ok[l] & need & !exact;
+                        let mut m = b.ok[l] & need;
                         while m != 0 {
                             let k = m.trailing_zeros() as usize;
                             m &= m - 1;
@@ -1495,6 +1590,24 @@ impl MeshData {
                             xs[k].push(Crossing { t, slot: blk.slots().start + l as u32, front: b.front[l] & (1 << k) != 0 });
                             cut[k] = cut[k].min(stop(k, t));
                             shrunk = true;
+                        }
+                    }
+                    let mut mm = (b.unsure[0] | b.unsure[1] | b.unsure[2] | b.unsure[3]) & need;
+                    while mm != 0 {
+                        let k = mm.trailing_zeros() as usize;
+                        mm &= mm - 1;
+                        // SAFETY: every active lane was written on the first leaf.
+                        let r = unsafe { rays[k].assume_init_ref() };
+                        for l in 0..blk.slots().len() {
+                            if b.unsure[l] & (1 << k) == 0 {
+                                continue;
+                            }
+                            let slot = blk.slots().start + l as u32;
+                            if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut8.0[k]) {
+                                xs[k].push(Crossing { t, slot, front });
+                                cut[k] = cut[k].min(stop(k, t));
+                                shrunk = true;
+                            }
                         }
                     }
                     need = 0;
@@ -1505,27 +1618,13 @@ impl MeshData {
                     mm &= mm - 1;
                     // SAFETY: every active lane was written on the first leaf.
                     let r = unsafe { rays[k].assume_init_ref() };
-                    match blk.test(&wide::TriRay4::new(r), tmin[k], cut[k]) {
-                        wide::Block::Hits(mut m, t, det) => {
-                            while m != 0 {
-                                let l = m.trailing_zeros();
-                                m &= m - 1;
-                                let t = t[l as usize];
-                                xs[k].push(Crossing { t, slot: blk.slots().start + l, front: det[l as usize] > 0.0 });
-                                cut[k] = cut[k].min(stop(k, t));
-                                shrunk = true;
-                            }
-                        }
-                        wide::Block::Exact => {
-                            for slot in blk.slots() {
-                                if let Some((t, front)) = wide::TriBlock::exact(&self.tris, slot, r, tmin[k], cut[k]) {
-                                    xs[k].push(Crossing { t, slot, front });
-                                    cut[k] = cut[k].min(stop(k, t));
-                                    shrunk = true;
-                                }
-                            }
-                        }
-                    }
+                    let ck = cut[k];
+                    let b = blk.test(&wide::TriRay4::new(r), tmin[k], ck);
+                    self.block_crossings(blk, &b, r, (tmin[k], ck), &mut |c: Crossing| {
+                        xs[k].push(c);
+                        cut[k] = cut[k].min(stop(k, c.t));
+                        shrunk = true;
+                    });
                 }
                 if shrunk {
                     thi = far(&cut, active);
@@ -1553,8 +1652,12 @@ impl MeshData {
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
+            // No crossing, no span (the count at tmin is zero).
+            if xs[k].is_empty() {
+                continue;
+            }
             self.sort_signed(&mut xs[k]);
-            self.walk_signed(&xs[k], 0, Walk { o, d: d[k], tmin: tmin[k], tmax: cut[k].min(tmax[k]), leaf }, &mut out[k]);
+            self.walk_signed(&xs[k], 0, Walk::new(line(k), tmin[k], cut[k].min(tmax[k]), leaf), &mut out[k]);
         }
         (active, cut)
     }
@@ -1590,7 +1693,9 @@ impl MeshData {
                 // (they are handled either way).
                 let d = Vec3::new(0.5773503, 0.5773491, 0.5773515);
                 let mut count = 0.0f32;
-                self.for_each_crossing(p, d, 0.0, f32::INFINITY, |c| count -= if c.front { self.orient } else { -self.orient });
+                self.for_each_crossing((p, d, Line64::of(p, d)), 0.0, f32::INFINITY, |c| {
+                    count -= if c.front { self.orient } else { -self.orient }
+                });
                 count > 0.5
             }
             InsideRule::Winding => self.winding_number(p) >= 0.5,

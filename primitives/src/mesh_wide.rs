@@ -2,8 +2,12 @@
 //! children (boxes SoA, tested with one SSE op per slab), and the triangles of
 //! each leaf (at most 4) in SoA blocks, tested four at a time with the same
 //! watertight test (bit-identical arithmetic: no FMA, same operation order) as
-//! the scalar [`intersect`](super::intersect). A lane whose u, v or w is exactly
-//! zero sends its leaf to the scalar test, which owns the exact tie-breaking.
+//! the scalar [`intersect`](super::intersect). The f32 test only decides where
+//! its edge functions are certain: each is compared with a bound of its
+//! rounding error ([`TriBlock::bound`]); a lane where no decision is certain
+//! (the ray passes within the f32 test's resolution, ~1e-6 of the distance,
+//! of an edge line) goes to the f64 test ([`intersect64`](super::intersect64)),
+//! which owns the tie-breaking.
 //!
 //! Measured on the bunny subdivided to 940k triangles (benches/embree/RESULTS.md):
 //! the binary pair walk it replaces ran camera rays at ~6 Mrays/s on one core.
@@ -11,7 +15,7 @@
 use glam::{BVec4A, Vec3, Vec4};
 use smallvec::SmallVec;
 
-use super::{intersect, WoopRay, SLAB_EPS};
+use super::{intersect64, WoopRay, SLAB_EPS};
 use crate::bvh::BvhNode;
 
 /// Child code flag: the child is a leaf (the rest is its block index).
@@ -52,6 +56,11 @@ impl Node4 {
 #[repr(C, align(32))]
 pub(super) struct TriBlock {
     v: [[f32; 4]; 9],
+    /// A ball around every corner: centre and radius ([`block_ball`]), for
+    /// the error bound of the f32 test.
+    ball: [f32; 4],
+    /// The lanes in use (`count` low bits).
+    valid: u32,
     /// First triangle slot (the lanes are slots `first..first + count`).
     first: u32,
     count: u32,
@@ -73,7 +82,9 @@ impl Wide {
         }
         let blocks = &mut w.blocks;
         w.nodes = collapse(bin, |n| {
-            let mut blk = TriBlock { v: [[f32::NAN; 4]; 9], first: n.first, count: n.count };
+            let ts = &tris[n.first as usize..(n.first + n.count) as usize];
+            let mut blk =
+                TriBlock { v: [[f32::NAN; 4]; 9], ball: block_ball(ts), valid: (1 << n.count) - 1, first: n.first, count: n.count };
             assert!(n.count <= 4, "mesh BVH leaf with {} triangles", n.count);
             for l in 0..n.count as usize {
                 let t = &tris[n.first as usize + l];
@@ -241,41 +252,77 @@ pub(super) struct TriRay4 {
     k: [usize; 3],
     o: [Vec4; 3],
     s: [Vec4; 3],
+    /// The origin in the axis order `k`, and the shears `sx`, `sy` (for the bound).
+    os: [f32; 3],
+    sxy: [f32; 2],
+    k10: (f32, f32),
 }
 
 impl TriRay4 {
     #[inline(always)]
     pub(super) fn new(r: &WoopRay) -> TriRay4 {
         let [kx, ky, kz] = r.k;
-        TriRay4 { k: r.k, o: [Vec4::splat(r.o[kx]), Vec4::splat(r.o[ky]), Vec4::splat(r.o[kz])], s: r.s.map(Vec4::splat) }
+        TriRay4 {
+            k: r.k,
+            o: [Vec4::splat(r.o[kx]), Vec4::splat(r.o[ky]), Vec4::splat(r.o[kz])],
+            s: r.s.map(Vec4::splat),
+            os: [r.o[kx], r.o[ky], r.o[kz]],
+            sxy: [r.s[0], r.s[1]],
+            k10: (r.k1, r.k0),
+        }
     }
 }
 
-/// Result of a block test: lanes hit, their t and det (det > 0: front facing).
-pub(super) enum Block {
-    Hits(u32, Vec4, Vec4),
-    /// Some lane has an exact zero edge function: use the scalar test.
-    Exact,
+/// Result of a block test: the lanes hit for certain (within the range),
+/// their t and det (det > 0: front facing), and the lanes the f32 test cannot
+/// decide (for [`TriBlock::exact`]).
+pub(super) struct Block {
+    pub(super) hits: u32,
+    pub(super) unsure: u32,
+    pub(super) t: Vec4,
+    pub(super) det: Vec4,
 }
 
 /// Result of [`TriBlock::test8_avx`], per triangle lane `l` and ray bit `k`.
 pub(super) struct Block8 {
-    /// Rays that hit triangle `l` within their range.
+    /// Rays that hit triangle `l` for certain within their range.
     pub(super) ok: [u32; 4],
     /// Rays for which triangle `l` faces front (det > 0).
     pub(super) front: [u32; 4],
     pub(super) t: [F8; 4],
-    /// Rays with some lane inside (or a padding lane), and with some zero edge
-    /// function: `test` answers `Exact` for the rays in both.
-    pub(super) inside_any: u32,
-    pub(super) zero_any: u32,
+    /// Rays for which the f32 test cannot decide triangle `l`.
+    pub(super) unsure: [u32; 4],
 }
 
 /// Result of [`TriBlock::nearest`].
 pub(super) enum Near {
     Miss,
     Hit(f32, u32),
-    Exact,
+    /// Some lane is undecided: the caller takes the lanes in order.
+    Unsure(Block),
+}
+
+/// The unit roundoff of f32.
+const U: f32 = f32::EPSILON * 0.5;
+/// The error bound's coefficients ([`TriBlock::bound`]) for an exact f32
+/// ray, and for one that rounds an exact line (with `K0_ROUNDED` times the
+/// origin's largest coordinate).
+pub(super) const K1: f32 = 34.0 * U;
+pub(super) const K1_ROUNDED: f32 = 48.0 * U;
+pub(super) const K0_ROUNDED: f32 = 12.0 * U;
+
+/// A ball around every corner of `tris`: the centre of their box and a radius
+/// rounded up, `[x, y, z, r]`.
+pub(super) fn block_ball(tris: &[[Vec3; 3]]) -> [f32; 4] {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for v in tris.iter().flatten() {
+        lo = lo.min(*v);
+        hi = hi.max(*v);
+    }
+    let q = (lo + hi) * 0.5;
+    let r = (hi.as_dvec3() - q.as_dvec3()).max(q.as_dvec3() - lo.as_dvec3()).max_element();
+    let r32 = r as f32;
+    [q.x, q.y, q.z, if (r32 as f64) < r { r32.next_up() } else { r32 }]
 }
 
 impl Wide {
@@ -304,6 +351,46 @@ impl TriBlock {
         self.first..self.first + self.count
     }
 
+    /// A block of the one triangle `tri` in lane 0, with the ball `ball`.
+    #[inline(always)]
+    pub(super) fn single(tri: &[Vec3; 3], ball: [f32; 4]) -> TriBlock {
+        let mut v = [[f32::NAN; 4]; 9];
+        for c in 0..3 {
+            for a in 0..3 {
+                v[c * 3 + a][0] = tri[c][a];
+            }
+        }
+        TriBlock { v, ball, valid: 1, first: 0, count: 1 }
+    }
+
+    /// A bound of the rounding error of the f32 edge functions of every
+    /// triangle of the block for one ray (origin `o` and shears `sx`, `sy`
+    /// in the ray's axis order `k`): an edge function larger in magnitude has
+    /// the sign of the exact one. From the block's ball (centre q, radius r):
+    /// every corner lies within M = |q - o|_inf + r of the origin along each
+    /// axis, so each projected corner coordinate is off by at most ~6.1 u M
+    /// (u = 2^-24; the subtraction of the origin, the shear, its product and
+    /// difference), and lies within P = |projected q|_inf + 2r of the ray
+    /// (|sx|, |sy| <= 1). An edge function, a difference of two products of
+    /// such coordinates, is then off by at most u P' (24.4 M + 4 P') with P'
+    /// = P + 18.3 u M <= 2.0001 M: at most 32.5 u M P'; with `k1` = [`K1`]
+    /// (34 u) and `k0` = 0 the bound is (k1 M + k0) P'. Where the f32 ray
+    /// is a rounding of the exact line ([`super::Line64`]), each projected
+    /// corner moves by up to 2 u |o|_inf more (the origin) and 2.01 u M (the
+    /// shears): `k1` = [`K1_ROUNDED`], `k0` = [`K0_ROUNDED`] |o|_inf, also
+    /// added to P'. [`test8_avx`](Self::test8_avx) makes the same bits.
+    #[inline(always)]
+    pub(super) fn bound(&self, k: [usize; 3], o: [f32; 3], (sx, sy): (f32, f32), (k1, k0): (f32, f32)) -> f32 {
+        let q = &self.ball;
+        let (qx, qy, qz) = (q[k[0]] - o[0], q[k[1]] - o[1], q[k[2]] - o[2]);
+        let m = qx.abs().max(qy.abs()).max(qz.abs()) + q[3];
+        let px = qx - sx * qz;
+        let py = qy - sy * qz;
+        let p = px.abs().max(py.abs()) + (q[3] + q[3] + m * (20.0 * U) + k0);
+        // Below the smallest normal f32 the products lose their relative precision.
+        ((m * k1 + k0) * p).max(f32::MIN_POSITIVE)
+    }
+
     /// The watertight test on the four lanes, within `[tlo, thi]`.
     #[inline(always)]
     pub(super) fn test(&self, r: &TriRay4, tlo: f32, thi: f32) -> Block {
@@ -321,41 +408,52 @@ impl TriBlock {
         let u = cx * by - cy * bx;
         let vv = ax * cy - ay * cx;
         let w = bx * ay - by * ax;
+        let b = Vec4::splat(self.bound(r.k, r.os, (r.sxy[0], r.sxy[1]), r.k10));
+        let nb = -b;
+        // Certain: a miss where two edge functions have opposite signs, a hit
+        // where all three share theirs (padding lanes are masked off).
+        let (hi, lo) = (u.max(vv).max(w), u.min(vv).min(w));
+        let miss = hi.cmpgt(b) & lo.cmplt(nb);
+        let hit = lo.cmpgt(b) | hi.cmplt(nb);
+        let unsure = !(miss | hit).bitmask() & self.valid;
         let z = Vec4::ZERO;
-        let neg = u.cmplt(z) | vv.cmplt(z) | w.cmplt(z);
-        let pos = u.cmpgt(z) | vv.cmpgt(z) | w.cmpgt(z);
-        // NaN lanes (padding) are neither: they pass here and fail the t range.
-        let inside = !(neg & pos);
-        if inside.bitmask() == 0 {
-            return Block::Hits(0, z, z);
-        }
-        let zero: BVec4A = u.cmpeq(z) | vv.cmpeq(z) | w.cmpeq(z);
-        if zero.any() {
-            return Block::Exact;
+        if hit.bitmask() == 0 {
+            return Block { hits: 0, unsure, t: z, det: z };
         }
         let det = u + vv + w;
         let t = (u * (sz * az) + vv * (sz * bz) + w * (sz * cz)) / det;
-        let ok = inside & det.cmpne(z) & t.cmpge(Vec4::splat(tlo)) & t.cmple(Vec4::splat(thi));
-        Block::Hits(ok.bitmask(), t, det)
+        let ok = hit & t.cmpge(Vec4::splat(tlo)) & t.cmple(Vec4::splat(thi));
+        Block { hits: ok.bitmask(), unsure, t, det }
     }
 
     /// The watertight test of every triangle of the block against eight rays
     /// from one origin that share the projection axes `k` (per-ray shear `s`,
     /// origin `o` in the `k` order), one 8-lane AVX step per triangle. Per
     /// (ray, triangle) the operations are those of [`test`](Self::test) in the
-    /// same order, so the hits, `t`s and facings are the same bits; `exact`
-    /// marks the rays for which `test` would answer [`Block::Exact`].
+    /// same order (the bound's too), so the hits, `t`s, facings and undecided
+    /// lanes are the same bits.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     #[inline]
-    pub(super) fn test8_avx(&self, k: [usize; 3], o: [f32; 3], s: &[F8; 3], tlo: &F8, thi: &F8) -> Block8 {
+    pub(super) fn test8_avx(&self, k: [usize; 3], o: [f32; 3], s: &[F8; 3], k10: &[F8; 2], (tlo, thi): (&F8, &F8)) -> Block8 {
         use std::arch::x86_64::*;
         let [kx, ky, kz] = k;
         let [ox, oy, oz] = o;
         let (sx, sy, sz) = (F8::load(&s[0]), F8::load(&s[1]), F8::load(&s[2]));
         let (tlo, thi) = (F8::load(tlo), F8::load(thi));
-        let z = _mm256_setzero_ps();
-        let mut out = Block8 { ok: [0; 4], front: [0; 4], t: [F8([0.0; 8]); 4], inside_any: 0, zero_any: 0 };
+        let mut out = Block8 { ok: [0; 4], front: [0; 4], t: [F8([0.0; 8]); 4], unsure: [0; 4] };
+        // The bound of `bound`, lane by lane (its scalar part is shared: one origin).
+        let q = &self.ball;
+        let (qx, qy, qz) = (q[kx] - ox, q[ky] - oy, q[kz] - oz);
+        let m = qx.abs().max(qy.abs()).max(qz.abs()) + q[3];
+        let sign = _mm256_set1_ps(-0.0);
+        let px = _mm256_andnot_ps(sign, _mm256_sub_ps(_mm256_set1_ps(qx), _mm256_mul_ps(sx, _mm256_set1_ps(qz))));
+        let py = _mm256_andnot_ps(sign, _mm256_sub_ps(_mm256_set1_ps(qy), _mm256_mul_ps(sy, _mm256_set1_ps(qz))));
+        let (k1, k0) = (F8::load(&k10[0]), F8::load(&k10[1]));
+        let p = _mm256_add_ps(_mm256_max_ps(px, py), _mm256_add_ps(_mm256_set1_ps(q[3] + q[3] + m * (20.0 * U)), k0));
+        let b = _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(m), k1), k0), p);
+        let b = _mm256_max_ps(b, _mm256_set1_ps(f32::MIN_POSITIVE));
+        let nb = _mm256_xor_ps(b, sign);
         let n = (self.count as usize).min(4);
         for l in 0..n {
             let v = |c: usize, a: usize| self.v[c * 3 + a][l];
@@ -380,11 +478,15 @@ impl TriBlock {
             let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
             let vv = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
             let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-            let neg = bits!(_CMP_LT_OQ, u, z) | bits!(_CMP_LT_OQ, vv, z) | bits!(_CMP_LT_OQ, w, z);
-            let pos = bits!(_CMP_GT_OQ, u, z) | bits!(_CMP_GT_OQ, vv, z) | bits!(_CMP_GT_OQ, w, z);
-            let inside = !(neg & pos) & 0xff;
-            out.inside_any |= inside;
-            out.zero_any |= bits!(_CMP_EQ_OQ, u, z) | bits!(_CMP_EQ_OQ, vv, z) | bits!(_CMP_EQ_OQ, w, z);
+            // Operand order as `test`'s `max` / `min` (the same lanes on NaN).
+            let hi = _mm256_max_ps(_mm256_max_ps(u, vv), w);
+            let lo = _mm256_min_ps(_mm256_min_ps(u, vv), w);
+            let miss = bits!(_CMP_GT_OQ, hi, b) & bits!(_CMP_LT_OQ, lo, nb);
+            let hit = bits!(_CMP_GT_OQ, lo, b) | bits!(_CMP_LT_OQ, hi, nb);
+            out.unsure[l] = !(miss | hit) & 0xff;
+            if hit == 0 {
+                continue;
+            }
             let det = _mm256_add_ps(_mm256_add_ps(u, vv), w);
             let num = _mm256_add_ps(
                 _mm256_add_ps(
@@ -394,41 +496,38 @@ impl TriBlock {
                 _mm256_mul_ps(w, _mm256_mul_ps(sz, _mm256_set1_ps(cz))),
             );
             let t = _mm256_div_ps(num, det);
-            let ok = inside & bits!(_CMP_NEQ_UQ, det, z) & bits!(_CMP_GE_OQ, t, tlo) & bits!(_CMP_LE_OQ, t, thi);
-            out.ok[l] = ok;
-            out.front[l] = bits!(_CMP_GT_OQ, det, z);
+            out.ok[l] = hit & bits!(_CMP_GE_OQ, t, tlo) & bits!(_CMP_LE_OQ, t, thi);
+            out.front[l] = bits!(_CMP_GT_OQ, det, _mm256_setzero_ps());
             // SAFETY: F8 is 32-byte aligned and 8 lanes long.
             unsafe { _mm256_store_ps(out.t[l].0.as_mut_ptr(), t) };
-        }
-        // The padding lanes of `test` (NaN) count as inside and never as zero.
-        if n < 4 {
-            out.inside_any = 0xff;
         }
         out
     }
 
     /// The nearest lane hit within `[tlo, thi]`: its `t` and lane (on equal `t`
     /// the last lane, as taking the lanes in order with `t <= thi` would), or
-    /// [`Near::Exact`] when the scalar test must decide.
+    /// [`Near::Unsure`] when some lane is for the f64 test.
     #[inline(always)]
     pub(super) fn nearest(&self, r: &TriRay4, tlo: f32, thi: f32) -> Near {
-        match self.test(r, tlo, thi) {
-            Block::Exact => Near::Exact,
-            Block::Hits(0, _, _) => Near::Miss,
-            Block::Hits(m, t, _) => {
-                let lanes = BVec4A::new(m & 1 != 0, m & 2 != 0, m & 4 != 0, m & 8 != 0);
-                let t = Vec4::select(lanes, t, Vec4::INFINITY);
-                let tm = t.min_element();
-                let last = 31 - (t.cmpeq(Vec4::splat(tm)).bitmask() & m).leading_zeros();
-                Near::Hit(tm, last)
-            }
+        let b = self.test(r, tlo, thi);
+        if b.unsure != 0 {
+            return Near::Unsure(b);
         }
+        let m = b.hits;
+        if m == 0 {
+            return Near::Miss;
+        }
+        let lanes = BVec4A::new(m & 1 != 0, m & 2 != 0, m & 4 != 0, m & 8 != 0);
+        let t = Vec4::select(lanes, b.t, Vec4::INFINITY);
+        let tm = t.min_element();
+        let last = 31 - (t.cmpeq(Vec4::splat(tm)).bitmask() & m).leading_zeros();
+        Near::Hit(tm, last)
     }
 
-    /// The scalar test of one lane (exact ties).
-    #[inline(always)]
+    /// The f64 test of one lane (for the lanes the f32 test leaves undecided).
+    #[inline(never)]
     pub(super) fn exact(tris: &[[Vec3; 3]], slot: u32, r: &WoopRay, tlo: f32, thi: f32) -> Option<(f32, bool)> {
-        intersect(r, &tris[slot as usize], tlo, thi)
+        intersect64(r, &tris[slot as usize], tlo, thi)
     }
 }
 

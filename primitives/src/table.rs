@@ -8,7 +8,7 @@ use crate::{
     aabb::Aabb,
     gcyl::GenCylData,
     kernels,
-    mesh::{MeshData, NearestRays8},
+    mesh::{Line64, MeshData, NearestRays8},
     ray::{scale_t, ScaledSink},
     sweep::SweptSphereData,
     Ray, Span, SpanSink, Surf,
@@ -533,10 +533,24 @@ pub struct LeafTable {
     /// f64: the linear part and the anchor's local point ([`crate::table64`]);
     /// per half-space, its f64 world plane relative to the anchor instead.
     pub maps64: Vec<(DMat3, DVec3)>,
+    /// Per leaf, for a mesh: its entry in `mesh_maps`; 0 for other kinds.
+    pub mesh_map: Vec<u32>,
+    /// Per mesh leaf: its f64 world-to-local map, through which its rays
+    /// are mapped ([`LeafTable::mesh_line`]).
+    pub mesh_maps: Vec<MeshMap>,
     /// Polish tolerance of the torus roots, relative to the minor radius (see
     /// [`kernels::torus_tol`]; a bake sets [`kernels::TORUS_TOLERANCE`] unless
     /// the `torus` knob says otherwise; 0 is full f64 precision).
     pub torus_tol: f64,
+}
+
+/// A mesh leaf's f64 world-to-local map, `inv (p - anchor) + b`.
+#[derive(Clone, Copy, Debug)]
+pub struct MeshMap {
+    /// The linear part.
+    pub inv: DMat3,
+    /// The anchor's local point.
+    pub b: DVec3,
 }
 
 impl LeafTable {
@@ -557,6 +571,8 @@ impl LeafTable {
         self.p1.clear();
         self.bounds.clear();
         self.ext.clear();
+        self.mesh_map.clear();
+        self.mesh_maps.clear();
         self.sweeps.clear();
         self.gcyls.clear();
         self.meshes.clear();
@@ -596,7 +612,7 @@ impl LeafTable {
         // Swept spheres, generalized cylinders and meshes keep their own
         // coordinates (their local bounds can lie anywhere): anchor at the node's origin.
         let anchor = world_from_node.translation.as_vec3();
-        let (inv32, _) = Self::inverse32(world_from_node, anchor)?;
+        let (inv32, b) = Self::inverse32(world_from_node, anchor)?;
         let m32 = Affine3A::from_mat3_translation(world_from_node.matrix3.as_mat3(), world_from_node.translation.as_vec3());
         // The node's own scale (the data's coordinates are checked as bounds below).
         let (kind, ext, local) = match data {
@@ -629,6 +645,16 @@ impl LeafTable {
         self.p1.push(Vec4::ZERO);
         self.bounds.push(bounds);
         self.ext.push(ext as u32);
+        let mut map = 0;
+        if kind == LeafKind::Mesh {
+            // Through the f32 map a mesh's rays moved by ~6e-8 of the
+            // origin's distance: rays grazing a face of a rotated
+            // octahedron crossed 46 to 65 of 400 times wrongly, ends up to
+            // 0.23 of the view off (tests/stress_grazing.rs).
+            self.mesh_maps.push(MeshMap { inv: world_from_node.matrix3.inverse(), b });
+            map = self.mesh_maps.len() - 1;
+        }
+        self.mesh_map.push(map as u32);
         Ok(i)
     }
 
@@ -697,6 +723,7 @@ impl LeafTable {
             ext = self.maps64.len() - 1;
         }
         self.ext.push(ext as u32);
+        self.mesh_map.push(0);
         Ok(i)
     }
 
@@ -740,6 +767,10 @@ impl LeafTable {
             LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone => return self.quadric_spans(i, ray, (tmin, tmax), out),
             LeafKind::Cuboid | LeafKind::HalfSpace => return self.flat_spans(i, ray, (tmin, tmax), out),
             _ => {}
+        }
+        if self.kind[iu] == LeafKind::Mesh {
+            self.mesh_spans(i, ray, (tmin, tmax), None, out);
+            return;
         }
         let m = &self.to_local[iu];
         let lo: Vec3 = m.transform_point3a(Vec3A::from(o) - self.anchor[iu]).into();
@@ -809,8 +840,7 @@ impl LeafTable {
         match self.kind[iu] {
             LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].spans(&local, i, out),
             LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].spans(&local, i, out),
-            LeafKind::Mesh => self.meshes[self.ext[iu] as usize].spans(&local, i, out),
-            _ => unreachable!("traced in f64 (ball_spans, quadric_spans, torus_spans, flat_spans)"),
+            _ => unreachable!("traced in f64 (ball_spans, quadric_spans, torus_spans, flat_spans, mesh_spans)"),
         }
     }
 
@@ -841,19 +871,49 @@ impl LeafTable {
     }
 
     #[inline(never)]
-    fn mesh_nearest<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), slack: f32, out: &mut S) -> f32 {
+    fn mesh_nearest<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, range: (f32, f32), slack: f32, out: &mut S) -> f32 {
+        self.mesh_spans(i, ray, range, Some(slack), out)
+    }
+
+    /// The exact line of the world ray `(o, d)` in mesh leaf `iu`'s frame
+    /// (its f64 map; `o - anchor` is exact in f64), and that line rounded
+    /// to f32: the ray the mesh's walks trace.
+    #[inline(always)]
+    fn mesh_line(&self, iu: usize, o: Vec3, d: Vec3) -> (Vec3, Vec3, Line64) {
+        let MeshMap { inv: a, b, .. } = &self.mesh_maps[self.mesh_map[iu] as usize];
+        let x = Line64 { o: *a * (o.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) + *b, d: *a * d.as_dvec3(), rounded: true };
+        (x.o.as_vec3(), x.d.as_vec3(), x)
+    }
+
+    /// The spans of mesh leaf `i` along the world ray on `(tmin, tmax)`:
+    /// all of them, or, with `Some(slack)`, what a nearest query needs
+    /// (see [`LeafTable::spans_for`]; returns where they stop being exact).
+    #[inline(always)]
+    fn mesh_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), slack: Option<f32>, out: &mut S) -> f32 {
         let iu = i as usize;
-        let m = &self.to_local[iu];
         let mesh = &self.meshes[self.ext[iu] as usize];
-        let lo: Vec3 = m.transform_point3a(Vec3A::from(ray.origin) - self.anchor[iu]).into();
-        let local = Ray::segment(lo, m.transform_vector3(ray.dir), tmin, tmax);
+        let (lo, ld, x) = self.mesh_line(iu, ray.origin, ray.dir);
+        let local = Ray::segment(lo, ld, tmin, tmax);
         if let Some(k) = Ray::dir_rescale(local.dir) {
             // As in `spans_in`: the walk in units of a direction near 1, its
-            // slack and result scaled back.
-            let v = mesh.spans_nearest(&local.rescaled(k), scale_t(slack, 1.0 / k), i, &mut ScaledSink { out, k });
-            return scale_t(v, k);
+            // slack and result scaled back (k a power of two: exact).
+            let (local, x) = (local.rescaled(k), Line64 { d: x.d * k, ..x });
+            let out = &mut ScaledSink { out, k };
+            return match slack {
+                Some(s) => scale_t(mesh.spans_nearest_on(&local, x, scale_t(s, 1.0 / k), i, out), k),
+                None => {
+                    mesh.spans_on(&local, x, i, out);
+                    f32::INFINITY
+                }
+            };
         }
-        mesh.spans_nearest(&local, slack, i, out)
+        match slack {
+            Some(s) => mesh.spans_nearest_on(&local, x, s, i, out),
+            None => {
+                mesh.spans_on(&local, x, i, out);
+                f32::INFINITY
+            }
+        }
     }
 
     /// Appends the world planes of leaf `i` when it is a polytope (a half-space:
@@ -929,12 +989,15 @@ impl LeafTable {
         if self.kind[iu] != LeafKind::Mesh {
             return (0, [f32::INFINITY; 8]);
         }
-        let m = &self.to_local[iu];
-        let dl: [Vec3; 8] = std::array::from_fn(|k| m.transform_vector3(q.d[k]));
+        let MeshMap { inv: a, b, .. } = &self.mesh_maps[self.mesh_map[iu] as usize];
+        // The rays' lines through the f64 map (as `mesh_line`).
+        let xo = *a * (q.o.as_dvec3() - Vec3::from(self.anchor[iu]).as_dvec3()) + *b;
+        let xd: [DVec3; 8] = std::array::from_fn(|k| *a * q.d[k].as_dvec3());
+        let dl: [Vec3; 8] = std::array::from_fn(|k| xd[k].as_vec3());
         // A lane whose local direction is out of the kernels' range (see
         // `spans_in`) is left to the single-ray query, which rescales it.
         let active = (0..8).filter(|&k| Ray::dir_rescale(dl[k]).is_none()).fold(0, |a, k| a | (1 << k)) & active;
-        let local = NearestRays8 { o: m.transform_point3a(Vec3A::from(q.o) - self.anchor[iu]).into(), d: &dl, ..*q };
+        let local = NearestRays8 { o: xo.as_vec3(), d: &dl, exact: Some((xo, &xd)), ..*q };
         self.meshes[self.ext[iu] as usize].spans_nearest8(&local, active, i, out)
     }
 
