@@ -428,8 +428,10 @@ impl TorusLine {
 
 /// The torus's spans for `ask`, with the place up to which they are exact:
 /// `f32::INFINITY`, or with `first_only` the end of the first span the range
-/// keeps that starts in the range, when later spans were left out. Spans
-/// may reach past the range (the caller clips).
+/// keeps that starts in the range, when later spans were left out, or where
+/// the piece holding its skipped exit starts (the span then reads as ending
+/// at infinity: past the exact place nothing is sure). Spans may reach past
+/// the range (the caller clips).
 ///
 /// A ring torus (`rho < 1`) is inside exactly where the quartic is negative
 /// (q factors into `((r-1)^2 + z^2 - rho^2) ((r+1)^2 + z^2 - rho^2)`, whose
