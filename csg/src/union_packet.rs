@@ -79,7 +79,7 @@ impl PacketMemo {
         }
         let i = match u.recs[..u.len].iter().position(|e| e.leaf == n) {
             Some(i) => i,
-            None => u.walk(prog, leaves, n),
+            None => u.walk(self, prog, leaves, n),
         };
         let e = &u.recs[i];
         let (lo, hi) = range;
@@ -108,11 +108,11 @@ impl UnionRecords {
     /// `PacketMemo::leaf_lane`, saved scenes/forest 0.3% of its instructions
     /// and cost scenes/nesting 1%: `leaf_lane` was no longer inlined where
     /// the evaluator calls it.)
-    fn walk(&mut self, prog: &Program, leaves: &LeafTable, n: u32) -> usize {
+    fn walk(&mut self, memo: &PacketMemo, prog: &Program, leaves: &LeafTable, n: u32) -> usize {
         let nu = n as usize;
         let w = prog.wide_of(nu);
         let lanes = self.lanes;
-        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: None });
+        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: Some((memo, k)) });
         let o: [_; 8] = std::array::from_fn(|k| ctx[k].ray.origin);
         let d: [_; 8] = std::array::from_fn(|k| ctx[k].ray.dir);
         let tmin: [f32; 8] = std::array::from_fn(|k| ctx[k].ray.tmin);

@@ -1,5 +1,5 @@
 #![cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-//! The convex analytic kernels (ball, ellipsoid, box, cylinder, half-space) for eight
+//! The convex analytic kernels (ball, ellipsoid, box, cylinder, cone, half-space) for eight
 //! rays at once, struct-of-arrays: a packet's lanes are mapped into the
 //! leaf's local space and solved with 8-lane SIMD, AVX where the CPU has it
 //! (chosen at run time), two SSE2 halves otherwise.
@@ -13,7 +13,7 @@
 //! its f32 centre and radius in world space, a half-space against its f64
 //! world plane, ellipsoids, cylinders and boxes through their f64 maps
 //! ([`crate::table64`]); every lane is done (f64
-//! needs no rescaling). The cone and the other kinds have no packet kernel.
+//! needs no rescaling). Tori, sweeps and meshes have no packet kernel here.
 
 use glam::{DMat3, DVec3, Vec3};
 
@@ -94,9 +94,9 @@ fn all_d<D: D8>() -> D {
     D::splat(f64::from_bits(u64::MAX))
 }
 
-/// `kernels::slab01` and `kernels::and` (f64) folded into a range `r`.
+/// `kernels::slab01` (f64): the range of the slab `0 <= z <= 1`.
 #[inline(always)]
-fn and_slab01<D: D8>(oz: D, dz: D, r: R8<D>) -> R8<D> {
+fn slab01<D: D8>(oz: D, dz: D) -> R8<D> {
     let zero = D::splat(0.0);
     let one = D::splat(1.0);
     let sd = |id: u32| D::splat(id as f64);
@@ -105,18 +105,25 @@ fn and_slab01<D: D8>(oz: D, dz: D, r: R8<D>) -> R8<D> {
     let tb = one.sub(oz).div(dz);
     let ord = ta.le(tb);
     let (inf, ninf) = (D::splat(f64::INFINITY), D::splat(f64::NEG_INFINITY));
-    let b0 = D::select(flat, ninf, D::select(ord, ta, tb));
-    let bs0 = D::select(flat, sd(sub::CAP0), D::select(ord, sd(sub::CAP0), sd(sub::CAP1)));
-    let b1 = D::select(flat, inf, D::select(ord, tb, ta));
-    let bs1 = D::select(flat, sd(sub::CAP1), D::select(ord, sd(sub::CAP1), sd(sub::CAP0)));
-    let inside = zero.le(oz).and(oz.le(one));
-    let slab_hit = D::select(flat, inside, all_d());
-    // `and(side, slab)`: the later entry (ties to the side), the earlier exit.
-    let e = r.t0.ge(b0);
-    let x = r.t1.le(b1);
-    let t0 = D::select(e, r.t0, b0);
-    let t1 = D::select(x, r.t1, b1);
-    R8 { hit: r.hit.and(slab_hit).and(t0.le(t1)), t0, s0: D::select(e, r.s0, bs0), t1, s1: D::select(x, r.s1, bs1) }
+    R8 {
+        hit: D::select(flat, zero.le(oz).and(oz.le(one)), all_d()),
+        t0: D::select(flat, ninf, D::select(ord, ta, tb)),
+        s0: D::select(flat, sd(sub::CAP0), D::select(ord, sd(sub::CAP0), sd(sub::CAP1))),
+        t1: D::select(flat, inf, D::select(ord, tb, ta)),
+        s1: D::select(flat, sd(sub::CAP1), D::select(ord, sd(sub::CAP1), sd(sub::CAP0))),
+    }
+}
+
+/// `kernels::and` (f64) of two ranges in lanes: the later entry and the
+/// earlier exit, each tied to `a`; `hit` where both hit and the entry is
+/// not past the exit.
+#[inline(always)]
+fn and8<D: D8>(a: R8<D>, b: R8<D>) -> R8<D> {
+    let e = a.t0.ge(b.t0);
+    let x = a.t1.le(b.t1);
+    let t0 = D::select(e, a.t0, b.t0);
+    let t1 = D::select(x, a.t1, b.t1);
+    R8 { hit: a.hit.and(b.hit).and(t0.le(t1)), t0, s0: D::select(e, a.s0, b.s0), t1, s1: D::select(x, a.s1, b.s1) }
 }
 
 /// `kernels::cylinder` (f64, in the cylinder's frame).
@@ -147,7 +154,95 @@ fn cylinder<D: D8>(o: &[D; 3], d: &[D; 3]) -> R8<D> {
         t1: D::select(axial, D::splat(f64::INFINITY), D::select(keep, t1, t0)),
         s1: side_id,
     };
-    and_slab01(o[2], d[2], side)
+    and8(side, slab01(o[2], d[2]))
+}
+
+/// `|x|` in lanes.
+#[inline(always)]
+fn abs8<D: D8>(x: D) -> D {
+    x.copysign(D::splat(0.0))
+}
+
+/// A piece of a cone cut to the slab, dropped where its midpoint (its
+/// finite end, or 0) has a negative radius `w0 + wd t` (the other nappe),
+/// as `kernels::cone` does.
+#[inline(always)]
+fn on_nappe<D: D8>(r: R8<D>, w0: D, wd: D) -> R8<D> {
+    let inf = D::splat(f64::INFINITY);
+    let (f0, f1) = (inf.gt(abs8(r.t0)), inf.gt(abs8(r.t1)));
+    let mid = D::splat(0.5).mul(r.t0.add(r.t1));
+    let tm = D::select(f0, D::select(f1, mid, r.t0), D::select(f1, r.t1, D::splat(0.0)));
+    let low = D::splat(-1e-6).gt(w0.add(wd.mul(tm)));
+    R8 { hit: low.andnot(r.hit), ..r }
+}
+
+/// `kernels::cone` (f64, in the frustum's frame, radius `ra + (rb - ra) z`
+/// over `0 <= z <= 1`): the slab, the double cone's up to two pieces
+/// (`cone_pieces`, its branches as selects in the same order), each cut to
+/// the slab and dropped on the other nappe, then their hull. (No closures:
+/// see `quadrics8`.)
+#[inline(always)]
+fn cone<D: D8>(o: &[D; 3], d: &[D; 3], ra: f64, rb: f64) -> R8<D> {
+    let zero = D::splat(0.0);
+    let (inf, ninf) = (D::splat(f64::INFINITY), D::splat(f64::NEG_INFINITY));
+    let side = D::splat(sub::SIDE as f64);
+    let slab = slab01(o[2], d[2]);
+    let k = D::splat(rb - ra);
+    let w0 = D::splat(ra).add(k.mul(o[2]));
+    let wd = k.mul(d[2]);
+    let dxy = d[0].mul(d[0]).add(d[1].mul(d[1]));
+    let a = dxy.sub(wd.mul(wd));
+    let b = o[0].mul(d[0]).add(o[1].mul(d[1])).sub(w0.mul(wd));
+    let c = o[0].mul(o[0]).add(o[1].mul(o[1])).sub(w0.mul(w0));
+    let norm = dxy.add(wd.mul(wd));
+    // `cone_pieces`: linear within 1e-12 of `norm`.
+    let lin = D::splat(1e-12).mul(norm).ge(abs8(a));
+    let b0 = b.eq(zero);
+    let tl = c.neg().div(D::splat(2.0).mul(b));
+    let bpos = b.gt(zero);
+    // Linear: b = 0 gives the whole line where c <= 0; else one half-line.
+    let lin_hit = D::select(b0, c.le(zero), all_d());
+    let lin_t0 = D::select(b0, ninf, D::select(bpos, ninf, tl));
+    let lin_t1 = D::select(b0, inf, D::select(bpos, tl, inf));
+    // Quadratic.
+    let disc = b.mul(b).sub(a.mul(c));
+    let neg_disc = zero.gt(disc);
+    let aneg = zero.gt(a);
+    let q = b.add(disc.sqrt().copysign(b)).neg();
+    let q0 = q.eq(zero);
+    let mb = b.neg().div(a);
+    let r0 = D::select(q0, mb, c.div(q));
+    let r1 = D::select(q0, mb, q.div(a));
+    let sw = r0.gt(r1);
+    let (u0, u1) = (D::select(sw, r1, r0), D::select(sw, r0, r1));
+    let apos = a.gt(zero);
+    // Piece 0: the whole line (disc < 0, a < 0), [u0, u1] (a > 0), or
+    // (-inf, u0] (else); piece 1 only in that last case: [u1, inf).
+    let quad0_t0 = D::select(neg_disc, ninf, D::select(apos, u0, ninf));
+    let quad0_t1 = D::select(neg_disc, inf, D::select(apos, u1, u0));
+    let quad0_hit = D::select(neg_disc, aneg, all_d());
+    let quad1_hit = neg_disc.andnot(apos.andnot(all_d()));
+    let p0 = R8 {
+        hit: D::select(lin, lin_hit, quad0_hit),
+        t0: D::select(lin, lin_t0, quad0_t0),
+        s0: side,
+        t1: D::select(lin, lin_t1, quad0_t1),
+        s1: side,
+    };
+    let p1 = R8 { hit: lin.andnot(quad1_hit), t0: u1, s0: side, t1: inf, s1: side };
+    let c0 = on_nappe(and8(p0, slab), w0, wd);
+    let c1 = on_nappe(and8(p1, slab), w0, wd);
+    // The hull: piece 0 alone, piece 1 alone, or both (ties to piece 0).
+    let both = c0.hit.and(c1.hit);
+    let e = D::select(both, c0.t0.le(c1.t0), c0.hit);
+    let x = D::select(both, c0.t1.ge(c1.t1), c0.hit);
+    R8 {
+        hit: D::select(c0.hit, all_d(), c1.hit),
+        t0: D::select(e, c0.t0, c1.t0),
+        s0: D::select(e, c0.s0, c1.s0),
+        t1: D::select(x, c0.t1, c1.t1),
+        s1: D::select(x, c0.s1, c1.s1),
+    }
 }
 
 /// The lanes' origins relative to point `c` (exact in f64) and their
@@ -235,7 +330,7 @@ impl LeafTable {
     pub fn has_kernel8(&self, i: u32) -> bool {
         matches!(
             self.kind[i as usize],
-            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cuboid | LeafKind::Cylinder | LeafKind::HalfSpace
+            LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cuboid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::HalfSpace
         )
     }
 
@@ -279,7 +374,7 @@ impl LeafTable {
         let iu = i as usize;
         match self.kind[iu] {
             LeafKind::Sphere => self.balls8::<D>(iu, rays, lanes, out),
-            LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cuboid => self.quadrics8::<D>(iu, rays, lanes, out),
+            LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Cuboid => self.quadrics8::<D>(iu, rays, lanes, out),
             LeafKind::HalfSpace => self.planes8::<D>(iu, rays, lanes, out),
             _ => unreachable!("no packet kernel for {:?}", self.kind[iu]),
         }
@@ -297,7 +392,7 @@ impl LeafTable {
         *out = record(r, lanes);
     }
 
-    /// [`LeafTable::ranges8`] of an ellipsoid, a cylinder or a box, as the
+    /// [`LeafTable::ranges8`] of an ellipsoid, a cylinder, a cone or a box, as the
     /// scalar path's `quadric_spans` and `flat_spans`: the lanes mapped to the leaf's frame in f64
     /// (`local64`, `map64`: `(p - anchor)`, then ((x_axis x + y_axis y) +
     /// z_axis z), then the anchor's local point), solved in f64. (No
@@ -312,6 +407,9 @@ impl LeafTable {
         let ld = [map_row(m, 0, &d), map_row(m, 1, &d), map_row(m, 2, &d)];
         let r = if self.kind[iu] == LeafKind::Cylinder {
             cylinder(&lo, &ld)
+        } else if self.kind[iu] == LeafKind::Cone {
+            let (ra, rb) = self.cone_radii(iu);
+            cone(&lo, &ld, ra, rb)
         } else if self.kind[iu] == LeafKind::Cuboid {
             let (p0, p1) = (self.p0[iu], self.p1[iu]);
             cuboid(&lo, &ld, [p0.x as f64, p0.y as f64, p0.z as f64], [p1.x as f64, p1.y as f64, p1.z as f64])

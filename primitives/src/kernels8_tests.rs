@@ -1,5 +1,5 @@
 use super::*;
-use crate::table::{push_clipped, Cuboid, Cylinder, HalfSpace, LeafKind, LeafShape, Sphere};
+use crate::table::{push_clipped, Cone, Cuboid, Cylinder, HalfSpace, LeafKind, LeafShape, Sphere};
 use crate::{Ray, Span, Surf};
 use glam::DAffine3;
 use rand::{rngs::SmallRng, Rng, SeedableRng};
@@ -13,9 +13,19 @@ fn v(rng: &mut SmallRng, r: f32) -> Vec3 {
 /// edge-on), far from and near the origin.
 fn table(rng: &mut SmallRng) -> LeafTable {
     let mut t = LeafTable::default();
-    for j in 0..60 {
+    for j in 0..72 {
         let c = v(rng, 3.0) + if j % 5 == 0 { Vec3::splat(1e4) } else { Vec3::ZERO };
-        let shape = match j % 4 {
+        let shape = match j % 6 {
+            // Cones with the apex at either end, and frusta.
+            4 | 5 => {
+                let r = rng.gen_range(0.1..1.0);
+                let (ra, rb) = match rng.gen_range(0..3) {
+                    0 => (r, 0.0),
+                    1 => (0.0, r),
+                    _ => (r, rng.gen_range(0.05..1.0)),
+                };
+                LeafShape::Cone(Cone { a: c, b: c + v(rng, 2.0) + Vec3::Y * 0.1, radius_a: ra, radius_b: rb })
+            }
             0 => LeafShape::Sphere(Sphere { center: c, radius: rng.gen_range(0.1..2.0) }),
             1 => {
                 let h = Vec3::new(rng.gen_range(0.1..2.0), rng.gen_range(0.1..2.0), rng.gen_range(0.1..2.0));
@@ -24,7 +34,7 @@ fn table(rng: &mut SmallRng) -> LeafTable {
             2 => LeafShape::Cylinder(Cylinder { a: c, b: c + v(rng, 2.0) + Vec3::X * 0.1, radius: rng.gen_range(0.1..1.0) }),
             _ => LeafShape::HalfSpace(HalfSpace { normal: v(rng, 1.0) + Vec3::Y * 0.05, offset: rng.gen_range(-2.0..2.0) }),
         };
-        let m = if j % 3 == 0 {
+        let m = if rng.gen_range(0..3) == 0 {
             DAffine3::IDENTITY
         } else {
             let a = glam::DMat3::from_cols_array(&std::array::from_fn(|_| rng.gen_range(-1.0..1.0))) + glam::DMat3::IDENTITY * 1.5;
@@ -46,7 +56,7 @@ fn packet_kernels_match_the_scalar_kernels_bit_for_bit() {
     let mut rng = SmallRng::seed_from_u64(seed);
     let t = table(&mut rng);
     let (mut lanes_done, mut lanes_hit) = (0u64, 0u64);
-    for round in 0..4000 {
+    for round in 0..6000 {
         let i = rng.gen_range(0..t.len() as u32);
         assert!(t.has_kernel8(i));
         let shared = round % 2 == 0;
@@ -103,11 +113,12 @@ fn packet_kernels_match_the_scalar_kernels_bit_for_bit() {
     let kinds: Vec<LeafKind> = (0..t.len()).map(|i| t.kind[i]).collect();
     let count = |k: LeafKind| kinds.iter().filter(|&&x| x == k).count();
     println!(
-        "{lanes_done} lanes compared, {lanes_hit} meeting their leaf; balls {}, ellipsoids {}",
+        "{lanes_done} lanes compared, {lanes_hit} meeting their leaf; balls {}, ellipsoids {}, cones {}",
         count(LeafKind::Sphere),
-        count(LeafKind::Ellipsoid)
+        count(LeafKind::Ellipsoid),
+        count(LeafKind::Cone)
     );
-    assert!(count(LeafKind::Sphere) > 0 && count(LeafKind::Ellipsoid) > 0);
+    assert!(count(LeafKind::Sphere) > 0 && count(LeafKind::Ellipsoid) > 0 && count(LeafKind::Cone) > 0);
     assert!(lanes_hit > 3000 && lanes_done > 10000);
 }
 
@@ -127,6 +138,9 @@ fn packet_kernels_match_the_scalar_kernels_on_edge_cases() {
     t.push(&LeafShape::Cylinder(Cylinder { a: Vec3::ZERO, b: Vec3::Z, radius: 1.0 }), &id).unwrap();
     t.push(&LeafShape::HalfSpace(HalfSpace { normal: Vec3::Y, offset: 0.5 }), &id).unwrap();
     t.push(&LeafShape::Sphere(Sphere { center: Vec3::new(1e3, 0.0, 0.0), radius: 1e-3 }), &id).unwrap();
+    t.push(&LeafShape::Cone(Cone { a: Vec3::ZERO, b: Vec3::Z, radius_a: 1.0, radius_b: 0.0 }), &id).unwrap();
+    t.push(&LeafShape::Cone(Cone { a: Vec3::ZERO, b: Vec3::Y, radius_a: 0.0, radius_b: 0.5 }), &id).unwrap();
+    t.push(&LeafShape::Cone(Cone { a: Vec3::ZERO, b: Vec3::X, radius_a: 1.0, radius_b: 0.5 }), &id).unwrap();
     let vals = [0.0f32, -0.0, 1.0, -1.0, 0.5, -0.5, 1e-30, -1e-30, 1e30, -1e30, 2.0, 1e3, 1e-3, f32::MIN_POSITIVE];
     let pick = |rng: &mut SmallRng| vals[rng.gen_range(0..vals.len())];
     let (mut compared, mut hits) = (0u64, 0u64);
@@ -167,4 +181,63 @@ fn packet_kernels_match_the_scalar_kernels_on_edge_cases() {
     }
     println!("{compared} lanes compared, {hits} meeting their leaf");
     assert!(compared > 50_000 && hits > 10_000);
+}
+
+/// Cones on rays nearly parallel to a generator (the quadratic's leading
+/// coefficient near 0: the linear case and its threshold), through the apex
+/// region and along the axis: bit for bit against `spans_in`.
+#[test]
+fn packet_cones_match_the_scalar_cone_along_generators() {
+    let seed = 0xc0e5u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut t = LeafTable::default();
+    let id = DAffine3::IDENTITY;
+    // Radius 1 - z/2 over 0 <= z <= 1 (generators run along (-cos f / 2, -sin f / 2, 1)), and an apex cone.
+    t.push(&LeafShape::Cone(Cone { a: Vec3::ZERO, b: Vec3::Z, radius_a: 1.0, radius_b: 0.5 }), &id).unwrap();
+    t.push(&LeafShape::Cone(Cone { a: Vec3::ZERO, b: Vec3::Z, radius_a: 0.5, radius_b: 0.0 }), &id).unwrap();
+    let (mut compared, mut hits, mut linear) = (0u64, 0u64, 0u64);
+    for round in 0..20000 {
+        let i = rng.gen_range(0..2u32);
+        let slope = 0.5f32;
+        let o: [Vec3; 8] = std::array::from_fn(|_| v(&mut rng, 1.5));
+        let d: [Vec3; 8] = std::array::from_fn(|k| {
+            let f = rng.gen_range(0.0..std::f32::consts::TAU);
+            let g = Vec3::new(-slope * f.cos(), -slope * f.sin(), 1.0) * if k % 2 == 0 { 1.0 } else { -1.0 };
+            match round % 3 {
+                0 => g,
+                1 => g + v(&mut rng, 1.0) * 10f32.powi(-rng.gen_range(3..9)),
+                _ => Vec3::new(0.0, 0.0, if k % 2 == 0 { 1.0 } else { -1.0 }) + v(&mut rng, 1e-3),
+            }
+        });
+        let rays = Rays8Soa::new(&o, &d);
+        let mut r = Ranges8::default();
+        t.ranges8(i, &rays, 0xff, &mut r);
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut s = Ranges8::default();
+            t.ranges8_sse(i, &rays, 0xff, &mut s);
+            assert_eq!((r.done, r.hit), (s.done, s.hit), "leaf {i} round {round}");
+        }
+        for k in 0..8 {
+            let ray = Ray::new(o[k], d[k]);
+            assert!(r.done & (1 << k) != 0);
+            let (dx, dy) = (d[k].x as f64, d[k].y as f64);
+            let wd = -slope as f64 * d[k].z as f64;
+            linear += ((dx * dx + dy * dy - wd * wd).abs() <= 1e-9) as u64;
+            compared += 1;
+            let mut want: Vec<Span> = Vec::new();
+            t.spans_in(i, &ray, (f32::NEG_INFINITY, f32::INFINITY), &mut want);
+            let mut got: Vec<Span> = Vec::new();
+            if r.hit & (1 << k) != 0 {
+                hits += 1;
+                let sp = Span { t0: r.t0[k], s0: Surf::new(i, r.s0[k]), t1: r.t1[k], s1: Surf::new(i, r.s1[k]) };
+                push_clipped(&mut got, sp, f32::NEG_INFINITY, f32::INFINITY);
+            }
+            let bits = |s: &Vec<Span>| s.iter().map(|x| (x.t0.to_bits(), x.s0, x.t1.to_bits(), x.s1)).collect::<Vec<_>>();
+            assert_eq!(bits(&got), bits(&want), "cone {i} lane {k} round {round}: o {:?} d {:?}", o[k], d[k]);
+        }
+    }
+    println!("{compared} lanes compared, {hits} meeting their cone, {linear} nearly parallel to a generator");
+    assert!(hits > 20_000 && linear > 1000);
 }

@@ -87,7 +87,7 @@ impl LeafTable {
 
     /// Cone `iu`'s radii at z = 0 and z = 1 (relative to the larger), in f64.
     #[inline(always)]
-    fn cone_radii(&self, iu: usize) -> (f64, f64) {
+    pub(crate) fn cone_radii(&self, iu: usize) -> (f64, f64) {
         let p0 = self.p0[iu];
         (p0.x as f64 + p0.z as f64, p0.y as f64 + p0.w as f64)
     }
