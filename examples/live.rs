@@ -21,7 +21,7 @@ use rothray::engine::*;
 
 #[path = "live_world/mod.rs"]
 mod live_world;
-use live_world::{extent, move_some, pick_ray, spawn_objects};
+use live_world::{churn_one, extent, move_some, pick_ray, spawn_objects};
 
 struct Args {
     objects: usize,
@@ -130,6 +130,17 @@ fn live(a: &Args) {
         }
         println!("{how}: nothing changed: median {:.3} ms", median(&mut idle));
         println!("{how}: move 1, sync, pick: median {:.3} ms", median(&mut one));
+        // Objects come and go: despawn one, spawn one, sync, pick.
+        let mut churn = Vec::new();
+        for _ in 0..a.frames.max(1) {
+            let touched = churn_one(&mut world, &mut roots[..a.objects], a.objects, &mut rng);
+            let t = Instant::now();
+            sync(&mut world, &mut scene, &touched);
+            let hit = scene.intersect(&pick_ray(&scene, &mut rng));
+            churn.push(ms(t));
+            std::hint::black_box(hit);
+        }
+        println!("{how}: despawn 1 and spawn 1, sync, pick: median {:.3} ms", median(&mut churn));
 
         let (mut synced, mut pick, mut shown, mut tiled) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut hits = 0;

@@ -26,6 +26,20 @@ pub struct Changes {
     /// A change to which objects exist or to their order: a solid appeared or
     /// vanished, a `CsgNode`'s children, `Hidden` or `ObjectOrder` changed.
     pub structural: bool,
+    /// The entities of those structural changes.
+    pub structural_entities: Vec<Entity>,
+}
+
+impl Changes {
+    /// Records a change of entity `e`'s bake input (`structural`: see
+    /// [`Changes::structural`]).
+    fn note(&mut self, e: Entity, structural: bool) {
+        self.dirty.push(e);
+        if structural {
+            self.structural = true;
+            self.structural_entities.push(e);
+        }
+    }
 }
 
 /// The last seen value (or key) of one component type, per entity, in the
@@ -93,8 +107,7 @@ impl<K> Snap<K> {
                 Some((pe, pk)) if *pe == e => {
                     if let Some(structural) = compare(pk, v) {
                         *pk = key(v);
-                        out.dirty.push(e);
-                        out.structural |= structural;
+                        out.note(e, structural);
                     }
                     i += 1;
                 }
@@ -106,22 +119,19 @@ impl<K> Snap<K> {
                             Some(k) => match compare(&k, v) {
                                 None => k,
                                 Some(structural) => {
-                                    out.dirty.push(e);
-                                    out.structural |= structural;
+                                    out.note(e, structural);
                                     key(v)
                                 }
                             },
                             None => {
-                                out.dirty.push(e);
-                                out.structural |= presence;
+                                out.note(e, presence);
                                 key(v)
                             }
                         };
                         self.items.push((e, k));
                     }
                     for e in old.into_keys() {
-                        out.dirty.push(e);
-                        out.structural |= presence;
+                        out.note(e, presence);
                     }
                     self.reindex();
                     return;
@@ -130,8 +140,7 @@ impl<K> Snap<K> {
         }
         if i < self.items.len() {
             for (e, _) in self.items.drain(i..) {
-                out.dirty.push(e);
-                out.structural |= presence;
+                out.note(e, presence);
             }
             self.reindex();
         }
@@ -172,9 +181,8 @@ impl<K> Snap<K> {
             let at = self.pos.get(id).copied().filter(|&p| p != NONE);
             if let Some(p) = at.filter(|&p| self.items[p as usize].0 != e) {
                 // The id was reused: the entity that held it is gone.
-                out.dirty.push(self.items[p as usize].0);
+                out.note(self.items[p as usize].0, presence);
                 self.remove_at(p as usize);
-                out.structural |= presence;
             }
             let at = self.pos.get(id).copied().filter(|&p| p != NONE);
             let cur = world.get::<&T>(e).ok();
@@ -183,14 +191,12 @@ impl<K> Snap<K> {
                     let (_, k) = &mut self.items[p as usize];
                     if let Some(structural) = compare(k, &v) {
                         *k = key(&v);
-                        out.dirty.push(e);
-                        out.structural |= structural;
+                        out.note(e, structural);
                     }
                 }
                 (Some(p), None) => {
                     self.remove_at(p as usize);
-                    out.dirty.push(e);
-                    out.structural |= presence;
+                    out.note(e, presence);
                 }
                 (None, Some(v)) => {
                     if id >= self.pos.len() {
@@ -198,8 +204,7 @@ impl<K> Snap<K> {
                     }
                     self.pos[id] = self.items.len() as u32;
                     self.items.push((e, key(&v)));
-                    out.dirty.push(e);
-                    out.structural |= presence;
+                    out.note(e, presence);
                 }
                 (None, None) => {}
             }

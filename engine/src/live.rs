@@ -80,7 +80,13 @@ pub(crate) struct LiveCounts {
     pub appended: u64,
     /// Object tree rebuilds after a partial sync (not counting full bakes).
     pub rebuilds: u64,
+    /// Structural syncs that only added and removed objects
+    /// ([`births`]: no listing of the objects, the tree edited in place).
+    pub births: u64,
 }
+
+#[path = "live_births.rs"]
+mod births;
 
 /// Dead rows are swept by a full bake once there are more of them than this
 /// and than live rows.
@@ -139,6 +145,16 @@ fn bake_all(world: &World, scene: &mut RenderScene, live: &mut LiveState, settin
 
 /// Re-bakes the objects that `changes` touch.
 fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, changes: &Changes) -> Result<(), BakeError> {
+    if changes.structural {
+        if let Some(b) = births::classify(world, changes, live).filter(|b| births::small(b, scene, live)) {
+            live.counts.partial += 1;
+            births::apply(world, scene, live, b)?;
+            update_scene_bounds(scene);
+            set_packet_paths(scene, live.meshes.packet_meshes());
+            scene.bake_count += 1;
+            return Ok(());
+        }
+    }
     let dirty = find_dirty_objects(changes, live);
     // Structural: the objects are listed again (in the fresh bake's order),
     // the new ones baked; else only the dirty ones, in object order.

@@ -32,6 +32,20 @@ impl MeshObjects {
         }
     }
 
+    /// The objects were renumbered (`map[old]`, `u32::MAX` for the ones
+    /// gone): their lists follow them.
+    pub(crate) fn renumber(&mut self, map: &[u32]) {
+        let lists = std::mem::take(&mut self.lists);
+        self.total = 0;
+        for (oi, l) in lists {
+            let to = map[oi as usize];
+            if to != u32::MAX {
+                self.total += l.len();
+                self.lists.insert(to, l);
+            }
+        }
+    }
+
     /// Object `oi` was re-baked: walks its tree.
     pub(crate) fn update(&mut self, scene: &RenderScene, oi: u32) {
         let root = scene.objects[oi as usize].root;

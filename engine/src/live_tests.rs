@@ -395,6 +395,76 @@ fn add_counts(total: &mut LiveCounts, c: LiveCounts) {
     total.partial += c.partial;
     total.in_place += c.in_place;
     total.appended += c.appended;
+    total.births += c.births;
+    total.rebuilds += c.rebuilds;
+}
+
+/// Objects come and go as in a game (spawned with random trees, names and
+/// orders, despawned whole, a few moved in the same frames), a sync after
+/// each frame: structural syncs of births and deaths only take the path
+/// that edits the object tree in place (`live_births.rs`), and the scene
+/// answers as a fresh bake does (hits, spans, classification, tiles that
+/// live as long as the scene, pictures).
+#[test]
+fn births_and_deaths_sync_like_a_fresh_bake() {
+    let seed = seed_from_env(1717);
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mesh = cube_mesh();
+    let mut total = LiveCounts::default();
+    for world_no in 0..4 {
+        let mut world = World::new();
+        let mut roots: Vec<Entity> = (0..[0, 3, 40, 200][world_no]).map(|_| spawn_object(&mut world, &mut rng, &mesh)).collect();
+        let mut scene = RenderScene::default();
+        let mut tiles = LongLivedTiles::new();
+        sync_scene(&mut world, &mut scene).unwrap();
+        let listed = world_no % 2 == 1;
+        for step in 0..80 {
+            let mut touched = Vec::new();
+            let mut what = Vec::new();
+            for _ in 0..rng.gen_range(1..4) {
+                match rng.gen_range(0..5) {
+                    0 | 1 => {
+                        let before: std::collections::HashSet<Entity> = world.iter().map(|e| e.entity()).collect();
+                        roots.push(spawn_object(&mut world, &mut rng, &mesh));
+                        touched.extend(world.iter().map(|e| e.entity()).filter(|e| !before.contains(e)));
+                        what.push("spawn");
+                    }
+                    2 | 3 if !roots.is_empty() => {
+                        let r = roots.swap_remove(rng.gen_range(0..roots.len()));
+                        despawn_tree(&mut world, r, &mut touched);
+                        what.push("despawn");
+                    }
+                    _ if !roots.is_empty() => {
+                        let r = roots[rng.gen_range(0..roots.len())];
+                        world.insert_one(r, Transform::from_translation(v3(&mut rng, 6.0))).unwrap();
+                        touched.push(r);
+                        what.push("move");
+                    }
+                    _ => {}
+                }
+            }
+            let what = format!("seed {seed} world {world_no} step {step} {what:?}");
+            if listed {
+                sync_scene_touched(&mut world, &mut scene, &touched).unwrap();
+            } else {
+                sync_scene(&mut world, &mut scene).unwrap();
+            }
+            let fresh = RenderScene::from_world(&world).unwrap();
+            compare(&scene, &fresh, &mut rng, &what);
+            check_packet_paths(&scene, &what);
+            compare_tiles(&scene, &mut tiles, &fresh, &mut rng, &what);
+            if step % 8 == 0 {
+                compare_pictures(&scene, &fresh, &what);
+            }
+        }
+        let c = scene.live.as_ref().unwrap().counts;
+        println!("world {world_no}: {c:?}");
+        add_counts(&mut total, c);
+    }
+    println!("{total:?}");
+    // (Full bakes: a world of a few objects changing half of them, and sweeps of dead rows.)
+    assert!(total.full * 10 < total.births, "births and deaths rarely bake everything: {total:?}");
+    assert!(total.births > 200, "the births path ran: {total:?}");
 }
 
 /// Random edits (spawn, despawn, move, reshape, radius, re-parent, op, hide,
@@ -451,6 +521,7 @@ fn live_sync_matches_a_fresh_bake_after_random_edits() {
     }
     println!("{total:?}; tile copies: {follow:?}");
     assert!(total.full > 0 && total.partial > 50 && total.in_place > 0 && total.appended > 0, "every path ran: {total:?}");
+    assert!(total.births > 0, "births and deaths ran in worlds without hidden objects: {total:?}");
     assert!(follow.edits > 0 && follow.copies > 0, "the tile copies followed edits and copied whole programs: {follow:?}");
 }
 
@@ -578,5 +649,5 @@ fn live_meshes_sync_by_object_like_a_fresh_bake() {
         assert!(world_no > 0 || shortcut > 0, "the small world takes the packet shortcut");
         add_counts(&mut total, c);
     }
-    assert!(total.in_place > 0 && total.appended > 0, "every path ran: {total:?}");
+    assert!(total.in_place > 0 && total.appended > 0 && total.births > 0, "every path ran: {total:?}");
 }

@@ -12,7 +12,11 @@ pub fn extent(n: usize) -> f32 {
 }
 
 pub fn spawn_objects(world: &mut World, n: usize, rng: &mut SmallRng) -> Vec<Entity> {
-    let side = extent(n);
+    spawn_objects_in(world, n, extent(n), rng)
+}
+
+/// `n` objects scattered over a cube of side `side`.
+pub fn spawn_objects_in(world: &mut World, n: usize, side: f32, rng: &mut SmallRng) -> Vec<Entity> {
     (0..n)
         .map(|_| {
             let p = Vec3::new(rng.gen_range(0.0..side), rng.gen_range(0.0..side), rng.gen_range(0.0..side));
@@ -21,6 +25,24 @@ pub fn spawn_objects(world: &mut World, n: usize, rng: &mut SmallRng) -> Vec<Ent
             world.spawn((CsgNode::difference([b, s]), Transform::from_translation(p)))
         })
         .collect()
+}
+
+/// Despawns a random object of `roots` (its node and both operands) and
+/// spawns a new one in the cube of `n` objects; returns every entity
+/// spawned or despawned (what a tool would list to `sync_scene_touched`).
+pub fn churn_one(world: &mut World, roots: &mut [Entity], n: usize, rng: &mut SmallRng) -> Vec<Entity> {
+    let i = rng.gen_range(0..roots.len());
+    let old = roots[i];
+    let mut touched: Vec<Entity> = world.get::<&CsgNode>(old).unwrap().children.to_vec();
+    touched.push(old);
+    for &e in &touched {
+        world.despawn(e).unwrap();
+    }
+    let new = spawn_objects_in(world, 1, extent(n), rng)[0];
+    touched.extend(world.get::<&CsgNode>(new).unwrap().children.iter().copied());
+    touched.push(new);
+    roots[i] = new;
+    touched
 }
 
 /// Moves `k` random objects by up to half a unit; returns them.
