@@ -16,7 +16,6 @@ use hecs::{Component, Entity, World};
 use smallvec::SmallVec;
 
 use crate::components::*;
-use crate::entity_hash::EntityMap;
 
 /// What changed since the last sync.
 #[derive(Default, Debug)]
@@ -49,7 +48,8 @@ impl Changes {
 struct Snap<K> {
     items: Vec<(Entity, K)>,
     /// Per entity id, its position in `items` (`NONE`: none); made on the
-    /// first scan of a [`Scope::Some`] (4 bytes per entity id and type).
+    /// first scan of a [`Scope::Some`], or on the first change of the
+    /// world's layout a full scan meets (4 bytes per entity id and type).
     pos: Vec<u32>,
 }
 
@@ -112,28 +112,47 @@ impl<K> Snap<K> {
                     i += 1;
                 }
                 _ => {
-                    // The world's layout changed: match the rest by entity.
-                    let mut old: EntityMap<K> = self.items.drain(i..).collect();
+                    // The world's layout changed (a spawn or a despawn moves
+                    // entities within their archetype): the rest is matched by
+                    // entity id through `pos`, in about the old order (no
+                    // hashing; with an `EntityMap` of the rest, a despawn and a
+                    // spawn among 100 000 objects took 22 ms of scans).
+                    if self.pos.is_empty() {
+                        self.pos.push(NONE);
+                        self.reindex();
+                    }
+                    let rest = i;
+                    let mut fresh: Vec<(Entity, K)> = Vec::with_capacity(self.items.len() - rest + 16);
                     for (e, v) in std::iter::once((e, v)).chain(it) {
-                        let k = match old.remove(&e) {
-                            Some(k) => match compare(&k, v) {
-                                None => k,
-                                Some(structural) => {
+                        let id = e.id() as usize;
+                        let p = self.pos.get(id).copied().unwrap_or(NONE) as usize;
+                        match self.items.get(p).filter(|(pe, _)| p >= rest && *pe == e) {
+                            Some((_, k)) => {
+                                if let Some(structural) = compare(k, v) {
                                     out.note(e, structural);
-                                    key(v)
                                 }
-                            },
-                            None => {
-                                out.note(e, presence);
-                                key(v)
+                                self.pos[id] = NONE; // matched
                             }
-                        };
-                        self.items.push((e, k));
+                            None => out.note(e, presence),
+                        }
+                        fresh.push((e, key(v)));
                     }
-                    for e in old.into_keys() {
-                        out.note(e, presence);
+                    for (j, (e, _)) in self.items.iter().enumerate().skip(rest) {
+                        let id = e.id() as usize;
+                        if self.pos[id] == j as u32 {
+                            out.note(*e, presence); // gone
+                            self.pos[id] = NONE;
+                        }
                     }
-                    self.reindex();
+                    self.items.truncate(rest);
+                    self.items.extend(fresh);
+                    for (j, (e, _)) in self.items.iter().enumerate().skip(rest) {
+                        let id = e.id() as usize;
+                        if id >= self.pos.len() {
+                            self.pos.resize(id + 1, NONE);
+                        }
+                        self.pos[id] = j as u32;
+                    }
                     return;
                 }
             }
