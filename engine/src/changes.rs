@@ -271,45 +271,70 @@ pub struct Snapshots {
     order: Snap<u32>,
 }
 
+/// A full scan of at least this many entities runs its two halves on two
+/// threads (transforms and nodes; the rest): on 100 000 objects (300 000
+/// entities) a scan that found nothing took 2.3 ms on one thread.
+const PARALLEL_SCAN: u32 = 20_000;
+
 /// System: the entities (of `scope`) whose bake input changed since the last
 /// call (the first call reports every entity with a component the bake
 /// reads).
 pub fn detect_changes(world: &World, scope: Scope, snaps: &mut Snapshots) -> Changes {
-    let mut c = Changes::default();
-    let world = (world, scope);
-    // Attributes: a new value (or one added or removed) re-bakes the objects
-    // holding it. Shapes: adding or removing one makes or unmakes a solid.
-    let value = |same: bool| (!same).then_some(false);
-    let order = |same: bool| (!same).then_some(true);
-    let bits = |t: &Transform| t.0.to_cols_array().map(f64::to_bits);
-    // Compared without an early exit, which the compiler vectorises (`==`
-    // on the arrays called memcmp: a quarter of a sync on 100 000 objects).
-    let same_bits = |k: &[u64; 12], t: &Transform| k.iter().zip(bits(t)).fold(0, |d, (a, b)| d | (a ^ b)) == 0;
-    snaps.transform.scan(world, false, &|k: &[u64; 12], t: &Transform| value(same_bits(k, t)), bits, &mut c);
-    snaps.sphere.scan_shape(world, &mut c);
-    snaps.cuboid.scan_shape(world, &mut c);
-    snaps.cylinder.scan_shape(world, &mut c);
-    snaps.cone.scan_shape(world, &mut c);
-    snaps.torus.scan_shape(world, &mut c);
-    snaps.half_space.scan_shape(world, &mut c);
-    snaps.swept.scan_shape(world, &mut c);
-    snaps.gcyl.scan_shape(world, &mut c);
-    let ptr = |m: &MeshSolid| std::sync::Arc::as_ptr(&m.0) as usize;
-    snaps.mesh.scan(world, true, &|k: &usize, m: &MeshSolid| value(*k == ptr(m)), ptr, &mut c);
-    // An op change re-bakes one object; a children change can make or unmake
-    // objects (a child is no object of its own).
-    // The copy keeps up to four children inline: one memory access less per
-    // node than a `Vec`.
-    let node = |n: &CsgNode| (n.op, SmallVec::from_slice(&n.children));
-    let same_kids = |a: &[Entity], b: &[Entity]| {
-        a.len() == b.len() && a.iter().zip(b).fold(0, |d, (x, y)| d | (x.to_bits().get() ^ y.to_bits().get())) == 0
+    let parallel = matches!(scope, Scope::All) && world.len() >= PARALLEL_SCAN;
+    let w = (world, scope);
+    let Snapshots { transform, sphere, cuboid, cylinder, cone, torus, half_space, swept, gcyl, mesh, node, material, name, hidden, order } =
+        snaps;
+    let mut big = |c: &mut Changes| {
+        let bits = |t: &Transform| t.0.to_cols_array().map(f64::to_bits);
+        // Compared without an early exit, which the compiler vectorises (`==`
+        // on the arrays called memcmp: a quarter of a sync on 100 000 objects).
+        let same_bits = |k: &[u64; 12], t: &Transform| k.iter().zip(bits(t)).fold(0, |d, (a, b)| d | (a ^ b)) == 0;
+        transform.scan(w, false, &|k: &[u64; 12], t: &Transform| value(same_bits(k, t)), bits, c);
+        // An op change re-bakes one object; a children change can make or
+        // unmake objects (a child is no object of its own). The copy keeps up
+        // to four children inline: one memory access less per node than a `Vec`.
+        let copy = |n: &CsgNode| (n.op, SmallVec::from_slice(&n.children));
+        let same_kids = |a: &[Entity], b: &[Entity]| {
+            a.len() == b.len() && a.iter().zip(b).fold(0, |d, (x, y)| d | (x.to_bits().get() ^ y.to_bits().get())) == 0
+        };
+        let node_diff = |k: &(Op, Kids), n: &CsgNode| if !same_kids(&k.1, &n.children) { Some(true) } else { value(k.0 == n.op) };
+        node.scan(w, true, &node_diff, copy, c);
     };
-    let node_diff = |k: &(Op, Kids), n: &CsgNode| if !same_kids(&k.1, &n.children) { Some(true) } else { value(k.0 == n.op) };
-    snaps.node.scan(world, true, &node_diff, node, &mut c);
-    let rgb = |m: &Material| m.color.to_array().map(f32::to_bits);
-    snaps.material.scan(world, false, &|k: &[u32; 3], m: &Material| value(*k == rgb(m)), rgb, &mut c);
-    snaps.name.scan(world, false, &|k: &String, n: &Name| value(*k == n.0), |n| n.0.clone(), &mut c);
-    snaps.hidden.scan(world, true, &|_: &(), _: &Hidden| None, |_| (), &mut c);
-    snaps.order.scan(world, true, &|k: &u32, o: &ObjectOrder| order(*k == o.0), |o| o.0, &mut c);
-    c
+    let mut rest = |c: &mut Changes| {
+        // Shapes: adding or removing one makes or unmakes a solid.
+        sphere.scan_shape(w, c);
+        cuboid.scan_shape(w, c);
+        cylinder.scan_shape(w, c);
+        cone.scan_shape(w, c);
+        torus.scan_shape(w, c);
+        half_space.scan_shape(w, c);
+        swept.scan_shape(w, c);
+        gcyl.scan_shape(w, c);
+        let ptr = |m: &MeshSolid| std::sync::Arc::as_ptr(&m.0) as usize;
+        mesh.scan(w, true, &|k: &usize, m: &MeshSolid| value(*k == ptr(m)), ptr, c);
+        // Attributes: a new value (or one added or removed) re-bakes the
+        // objects holding it.
+        let rgb = |m: &Material| m.color.to_array().map(f32::to_bits);
+        material.scan(w, false, &|k: &[u32; 3], m: &Material| value(*k == rgb(m)), rgb, c);
+        name.scan(w, false, &|k: &String, n: &Name| value(*k == n.0), |n| n.0.clone(), c);
+        hidden.scan(w, true, &|_: &(), _: &Hidden| None, |_| (), c);
+        order.scan(w, true, &|k: &u32, o: &ObjectOrder| (*k != o.0).then_some(true), |o| o.0, c);
+    };
+    let (mut a, mut b) = (Changes::default(), Changes::default());
+    if parallel {
+        rayon::join(|| big(&mut a), || rest(&mut b));
+    } else {
+        big(&mut a);
+        rest(&mut b);
+    }
+    a.dirty.append(&mut b.dirty);
+    a.structural |= b.structural;
+    a.structural_entities.append(&mut b.structural_entities);
+    a
+}
+
+/// A compare's answer for an attribute: `None` when the same, else a
+/// change that is not structural.
+fn value(same: bool) -> Option<bool> {
+    (!same).then_some(false)
 }
