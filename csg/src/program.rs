@@ -415,6 +415,8 @@ pub struct Scratch {
     /// A caller's candidate list, `(entry t, id)` (the engine's objects along
     /// a ray), kept here so that it too is reused from ray to ray.
     pub cands: Vec<(f32, u32)>,
+    /// A caller's queue for [`rothray_primitives::bvh::FlatBvh::visit_nearest`].
+    pub queue: rothray_primitives::bvh::NearestQueue,
 }
 
 /// Builds a [`Program`] bottom-up.

@@ -52,6 +52,26 @@ pub struct FlatBvh {
     pub parts: Vec<FlatBvh>,
 }
 
+/// The queue of [`FlatBvh::visit_nearest`] (kept by callers to reuse its
+/// memory): entries as (entry parameter in `total_cmp` order, 0 for a node
+/// or 1 for a primitive, id), smallest first.
+pub type NearestQueue = Vec<std::cmp::Reverse<(u32, u32, u32)>>;
+
+/// `t`'s bits as an integer in `f32::total_cmp` order.
+fn ordered(t: f32) -> u32 {
+    let b = t.to_bits();
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
+}
+
+/// The inverse of [`ordered`].
+fn unordered(k: u32) -> f32 {
+    f32::from_bits(if k & 0x8000_0000 != 0 { k & 0x7fff_ffff } else { !k })
+}
+
 impl FlatBvh {
     /// Builds over `boxes` (all must be finite and non-empty). `max_leaf` primitives per leaf at most.
     pub fn build(boxes: &[Aabb], max_leaf: u32) -> FlatBvh {
@@ -310,6 +330,78 @@ impl FlatBvh {
         }
     }
 
+    /// Visits the primitives whose own entry (`entry(prim)`, `None` when
+    /// the ray misses the primitive's box) is at most the limit, in
+    /// increasing (entry in `total_cmp` order, id) order: the order of
+    /// sorting them all, without listing those past the limit. `f(prim,
+    /// entry)` returns the new limit (`limit` at first). Best-first by
+    /// node entry: a node's box holds its primitives' boxes and the slab
+    /// test is monotone in the box, so a node enters no later than its
+    /// primitives, and a node is opened before a primitive of the same
+    /// entry. Node boxes are tested on `[tmin, tmax]`, as
+    /// [`FlatBvh::traverse`] does. (A wide tree lists and sorts.)
+    pub fn visit_nearest(
+        &self,
+        (o, inv_d, tmin, tmax): (Vec3, Vec3, f32, f32),
+        limit: f32,
+        queue: &mut NearestQueue,
+        entry: impl Fn(u32) -> Option<f32>,
+        mut f: impl FnMut(u32, f32) -> f32,
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut limit = limit;
+        if self.cw.is_some() {
+            let mut all: Vec<(f32, u32)> = Vec::new();
+            self.traverse(o, inv_d, tmin, tmax, |p, _| {
+                if let Some(t) = entry(p) {
+                    all.push((t, p));
+                }
+                tmax
+            });
+            all.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for (t, p) in all {
+                if t > limit {
+                    break;
+                }
+                limit = f(p, t);
+            }
+            return;
+        }
+        let mut heap = std::collections::BinaryHeap::from(std::mem::take(queue));
+        heap.clear();
+        let node_entry = |n: &BvhNode| Aabb::new(n.min, n.max).ray_range(o, inv_d, tmin, tmax).map(|r| r.0);
+        if let Some(t) = node_entry(&self.nodes[0]) {
+            heap.push(std::cmp::Reverse((ordered(t), 0, 0)));
+        }
+        while let Some(std::cmp::Reverse((k, kind, id))) = heap.pop() {
+            let t = unordered(k);
+            if t > limit {
+                break;
+            }
+            if kind == 1 {
+                limit = f(id, t);
+                continue;
+            }
+            let n = &self.nodes[id as usize];
+            if n.count > 0 {
+                for &p in &self.prims[n.first as usize..(n.first + n.count) as usize] {
+                    if let Some(tp) = entry(p).filter(|&tp| tp <= limit) {
+                        heap.push(std::cmp::Reverse((ordered(tp), 1, p)));
+                    }
+                }
+            } else {
+                for c in [n.first, n.first + 1] {
+                    if let Some(tc) = node_entry(&self.nodes[c as usize]).filter(|&tc| tc <= limit) {
+                        heap.push(std::cmp::Reverse((ordered(tc), 0, c)));
+                    }
+                }
+            }
+        }
+        *queue = heap.into_vec();
+    }
+
     /// Visits every primitive whose leaf box contains `p` (a superset is fine:
     /// callers test the primitive itself). A `CwBvh` has no point query (and a
     /// zero-length ray finds nothing in it: it culls boxes left before t =
@@ -323,6 +415,50 @@ impl FlatBvh {
 mod tests {
     use super::*;
     use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    /// `visit_nearest` visits exactly the boxes the ray meets, in the order
+    /// of sorting them by (entry, id), and stops where the limit says: on
+    /// random boxes (many with equal entries: shared faces), random rays,
+    /// limits from the visited entries.
+    #[test]
+    fn nearest_visits_match_a_sorted_list() {
+        let seed = 0x9ea7u64;
+        println!("seed {seed:#x}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let mut queue = NearestQueue::new();
+        for round in 0..300 {
+            let n = rng.gen_range(1..200);
+            // Integer corners: coincident faces and equal entries.
+            let boxes: Vec<Aabb> = (0..n)
+                .map(|_| {
+                    let c = Vec3::new(rng.gen_range(-8..8) as f32, rng.gen_range(-8..8) as f32, rng.gen_range(-8..8) as f32);
+                    Aabb::new(c, c + Vec3::new(rng.gen_range(1..4) as f32, rng.gen_range(1..4) as f32, rng.gen_range(1..4) as f32))
+                })
+                .collect();
+            let bvh = FlatBvh::build_cull(&boxes, 2);
+            let o = Vec3::new(rng.gen_range(-20.0..20.0), rng.gen_range(-20.0..20.0), -30.0);
+            let d = Vec3::new(rng.gen_range(-0.4..0.4), rng.gen_range(-0.4..0.4), 1.0);
+            let (inv, tmin) = (d.recip(), if round % 3 == 0 { 10.0 } else { 0.0 });
+            let entry = |p: u32| boxes[p as usize].ray_range(o, inv, tmin, f32::INFINITY).map(|r| r.0);
+            let mut want: Vec<(f32, u32)> = (0..n as u32).filter_map(|p| entry(p).map(|t| (t, p))).collect();
+            want.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            // A limit that falls at the k-th entry (or none).
+            let stop = rng.gen_range(0..want.len() + 1);
+            let cut = want.get(stop).map_or(f32::INFINITY, |w| w.0);
+            let mut got = Vec::new();
+            bvh.visit_nearest((o, inv, tmin, f32::INFINITY), f32::INFINITY, &mut queue, entry, |p, t| {
+                got.push((t, p));
+                if got.len() > stop {
+                    cut
+                } else {
+                    f32::INFINITY
+                }
+            });
+            let expect: Vec<(f32, u32)> =
+                want.iter().copied().enumerate().take_while(|&(i, w)| i <= stop || w.0 <= cut).map(|x| x.1).collect();
+            assert_eq!(got, expect, "round {round}: {n} boxes, stop after {stop}");
+        }
+    }
 
     #[test]
     fn traversal_matches_brute_force() {
