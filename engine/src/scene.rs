@@ -352,27 +352,23 @@ impl RenderScene {
                 return true;
             }
         }
-        let mut hit = false;
-        let mut ask = |oi: u32, scratch: &mut Scratch| {
-            hit = self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, ctx, (ray.tmin, ray.tmax), scratch).is_some());
-            if hit {
-                f32::NEG_INFINITY // found: stop
-            } else {
-                ray.tmax
-            }
-        };
-        if let Some(TileView { bounded: Some(_), .. }) = tile {
-            self.visit_candidates(ray, tile, ray.tmax, scratch, ask);
-        } else {
-            // Any order will do: the tree's walk, depth first (best first
-            // cost scenes/capsules 1.4% of its instructions lit).
-            self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
-                if tile.is_some_and(|t| t.root(oi).is_none()) || entry(&self.objects[oi as usize].bounds, ray).is_none() {
-                    return ray.tmax;
+        let mut cands = std::mem::take(&mut scratch.cands);
+        cands.clear();
+        match tile {
+            Some(TileView { bounded: Some(list), .. }) => Self::listed_candidates(ray, list, &mut cands),
+            _ => self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
+                if tile.is_none_or(|t| t.root(oi).is_some()) {
+                    if let Some(t0) = entry(&self.objects[oi as usize].bounds, ray) {
+                        cands.push((t0, oi));
+                    }
                 }
-                ask(oi, scratch)
-            });
+                ray.tmax
+            }),
         }
+        let hit = cands
+            .iter()
+            .any(|&(_, oi)| self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, ctx, (ray.tmin, ray.tmax), scratch).is_some()));
+        scratch.cands = cands;
         hit
     }
 
