@@ -45,6 +45,9 @@ pub enum Shape {
         c: DVec3,
         r: f64,
         path: String,
+        /// Imported with `"inside": "winding"` (the generalized winding
+        /// number) instead of the default orientation rule: the same solid.
+        winding: bool,
     },
     Union(Vec<Shape>),
     Inter(Vec<Shape>),
@@ -109,7 +112,7 @@ impl Shape {
             Shape::Cone { a, b, ra, rb } => Shape::Cone { a: *a - by, b: *b - by, ra: *ra, rb: *rb },
             Shape::Torus { c, axis, major, minor } => Shape::Torus { c: *c - by, axis: *axis, major: *major, minor: *minor },
             Shape::Plane { n, d } => Shape::Plane { n: *n, d: d - n.dot(by) },
-            Shape::Octa { c, r, path } => Shape::Octa { c: *c - by, r: *r, path: path.clone() },
+            Shape::Octa { c, r, path, winding } => Shape::Octa { c: *c - by, r: *r, path: path.clone(), winding: *winding },
             Shape::Union(c) => Shape::Union(all(c)),
             Shape::Inter(c) => Shape::Inter(all(c)),
             Shape::Diff(c) => Shape::Diff(all(c)),
@@ -133,7 +136,8 @@ impl Shape {
                 format!("{{\"torus\":{{\"center\":{},\"axis\":{},\"major\":{major:?},\"minor\":{minor:?}}}}}", v(*c), v(*axis))
             }
             Shape::Plane { n, d } => format!("{{\"plane\":{{\"normal\":{},\"offset\":{d:?}}}}}", v(*n)),
-            Shape::Octa { path, .. } => format!("{{\"mesh\":{{\"path\":{path:?}}}}}"),
+            Shape::Octa { path, winding: false, .. } => format!("{{\"mesh\":{{\"path\":{path:?}}}}}"),
+            Shape::Octa { path, winding: true, .. } => format!("{{\"mesh\":{{\"path\":{path:?},\"inside\":\"winding\"}}}}"),
             Shape::Union(c) | Shape::Inter(c) | Shape::Diff(c) => {
                 let k = match self {
                     Shape::Union(_) => "union",
@@ -273,7 +277,15 @@ pub fn octa_mesh(c: DVec3, r: f64, levels: u32) -> Shape {
         }
     }
     std::fs::write(&path, obj).expect("write the octahedron mesh");
-    Shape::Octa { c, r, path: path.to_string_lossy().into_owned() }
+    Shape::Octa { c, r, path: path.to_string_lossy().into_owned(), winding: false }
+}
+
+/// [`octa_mesh`] imported under the winding rule (`"inside": "winding"`).
+pub fn octa_mesh_winding(c: DVec3, r: f64, levels: u32) -> Shape {
+    match octa_mesh(c, r, levels) {
+        Shape::Octa { c, r, path, .. } => Shape::Octa { c, r, path, winding: true },
+        _ => unreachable!("octa_mesh makes an octahedron"),
+    }
 }
 
 /// Deletes the mesh files [`octa_mesh`] wrote in this process.

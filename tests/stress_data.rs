@@ -21,7 +21,7 @@ use glam::DVec3;
 use rand::{rngs::SmallRng, Rng, SeedableRng};
 use rothray::primitives::Span;
 
-use crate::oracle::{octa_mesh, remove_mesh_files, rp, Shape};
+use crate::oracle::{octa_mesh, octa_mesh_winding, remove_mesh_files, rp, Shape};
 use crate::stress::{model_crossings, r32, robust, rv, wrong_count, Stats};
 
 /// A solid with data and its f64 model.
@@ -218,7 +218,14 @@ fn solids(c: DVec3, s: f64) -> Vec<(&'static str, Model)> {
     // The octahedron: exact in f32 (see the module docs).
     let (oc, or) = if c == DVec3::ZERO { (c, 2f64.powi((0.8 * s).log2().floor() as i32)) } else { ((c * 8.0).round() / 8.0, 1.0) };
     let octa = Model::Octa(octa_mesh(oc, or, 2));
-    vec![("swept sphere", sweep), ("gen. cylinder, circle", tube), ("gen. cylinder, polygon + twist", prism), ("mesh octahedron", octa)]
+    let octa_w = Model::Octa(octa_mesh_winding(oc, or, 2));
+    vec![
+        ("swept sphere", sweep),
+        ("gen. cylinder, circle", tube),
+        ("gen. cylinder, polygon + twist", prism),
+        ("mesh octahedron", octa),
+        ("mesh octahedron, winding rule", octa_w),
+    ]
 }
 
 /// Like `stress::measure`, for a solid with data: 160 rays from 4 sizes away

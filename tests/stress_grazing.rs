@@ -13,7 +13,7 @@ use glam::{DAffine3, DMat3, DVec3};
 use rand::{rngs::SmallRng, Rng};
 
 use crate::oracle::*;
-use crate::oracle::{octa_mesh, remove_mesh_files};
+use crate::oracle::{octa_mesh, octa_mesh_winding, remove_mesh_files};
 use crate::stress::{r32, rv, tangent_places};
 use crate::stress_tangent::{across, tally, Aim, Family};
 
@@ -157,6 +157,10 @@ fn families(c: DVec3, s: f64) -> Vec<Family> {
     // sheared matrix (traced through the mesh leaf's world-to-local map).
     let octa_rot = Shape::Xf { m: rot, json: rot_json, s: Box::new(octa_mesh(DVec3::ZERO, 0.5, 2)) };
     let octa_shear = sheared(octa_mesh(DVec3::ZERO, 0.5, 2));
+    // The same solids under the winding rule (the winding number's walk and
+    // its own crossings, not the orientation rule's).
+    let octa_w = octa_mesh_winding(oc, or, 2);
+    let octa_w_shear = sheared(octa_mesh_winding(DVec3::ZERO, 0.5, 2));
     let fam = |name, shape, aim: Box<dyn Fn(&mut SmallRng) -> Aim>| Family { name, shape, near: c, size: 1.5 * s, aim, in_plane: None };
     vec![
         fam("box faces (axis-aligned)", bx.clone(), Box::new(move |r| axis.face(r))),
@@ -177,6 +181,15 @@ fn families(c: DVec3, s: f64) -> Vec<Family> {
         },
         fam("mesh octahedron faces (rotated, scaled)", octa_rot, Box::new(move |r| octa_aim_xf(r, rot, 0.5))),
         fam("mesh octahedron faces (sheared matrix)", octa_shear, Box::new(move |r| octa_aim_xf(r, shear, 0.5))),
+        Family {
+            name: "mesh octahedron faces (winding rule)",
+            shape: octa_w,
+            near: oc,
+            size: 1.5 * s,
+            aim: Box::new(move |r| octa_aim(r, oc, or)),
+            in_plane: Some(Box::new(move |o, d| octa_in_plane(o, d, oc, or))),
+        },
+        fam("mesh octahedron faces (winding rule, sheared matrix)", octa_w_shear, Box::new(move |r| octa_aim_xf(r, shear, 0.5))),
     ]
 }
 

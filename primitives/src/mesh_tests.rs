@@ -109,7 +109,14 @@ fn check_ray_closed(m: &MeshData, o: Vec3, d: Vec3, convex: Option<(&[Vec3], &[[
     m.spans(&Ray::segment(o, d, tmin, tmax), 7, &mut spans);
     let mut checked = 0;
     let mut prev = tmin;
-    let mut probe = |t: f32, want: bool| {
+    // Each piece is probed at its middle. The probe is an f32 point, off the
+    // line by its rounding (about 1e-7 here), while the spans are decided on
+    // the line itself: a piece thinner than that is not probed.
+    let mut probe = |(a, b): (f32, f32), want: bool| {
+        if (b - a) * d.length() < 1e-5 {
+            return;
+        }
+        let t = 0.5 * (a + b);
         let p = o + d * t;
         let got = m.contains(p);
         if let Some((pos, tris)) = convex {
@@ -125,13 +132,13 @@ fn check_ray_closed(m: &MeshData, o: Vec3, d: Vec3, convex: Option<(&[Vec3], &[[
     for s in &spans {
         assert!(s.t0 >= prev && s.t1 > s.t0, "spans not sorted/disjoint: {spans:?}");
         if s.t0 > prev {
-            probe(0.5 * (prev + s.t0), false);
+            probe((prev, s.t0), false);
         }
-        probe(0.5 * (s.t0 + s.t1), true);
+        probe((s.t0, s.t1), true);
         prev = s.t1;
     }
     if prev < tmax {
-        probe(0.5 * (prev + tmax), false);
+        probe((prev, tmax), false);
     }
     checked
 }
