@@ -8,9 +8,16 @@
 //! Why: neighbouring camera rays (and a light's shadow rays from
 //! neighbouring hits) ask mostly the same leaves, and one 8-lane solve costs
 //! about what one scalar query does.
+//!
+//! A ring torus is prepared the same way: the first lane that asks makes
+//! every lane's [`TorusPrep`] (the line in its frame, the quartic and the
+//! roots of its derivative), one step for all lanes before the next, so that
+//! the lanes' chains of square roots and divisions overlap; each lane then
+//! finishes its own query from its prep ([`PacketMemo::torus_lane`]).
 
 use rothray_primitives::{
     glam::Vec3,
+    kernels::TorusPrep,
     kernels8::{Ranges8, Rays8Soa},
     table::{push_clipped, LeafTable},
     Span, SpanSink, Surf,
@@ -23,6 +30,9 @@ use crate::counts;
 /// collision only costs a second solve).
 const SLOTS: usize = 64;
 
+/// Cached tori per packet (as [`SLOTS`]; a prep is about 1.5 KB for eight lanes).
+const TORUS_SLOTS: usize = 8;
+
 /// The packet's rays and the leaves solved for them.
 #[derive(Debug, Default)]
 pub(crate) struct LeafRecords {
@@ -33,6 +43,11 @@ pub(crate) struct LeafRecords {
     generation: u32,
     /// Per slot: (leaf, generation, its lanes).
     slots: Vec<(u32, u32, Ranges8)>,
+    /// The rays as given (for the tori's preps).
+    o: [Vec3; 8],
+    d: [Vec3; 8],
+    /// Per torus slot: (leaf, generation, its lanes' preps).
+    tori: Vec<(u32, u32, [Option<TorusPrep>; 8])>,
 }
 
 impl LeafRecords {
@@ -52,6 +67,39 @@ impl PacketMemo {
         }
         r.generation = r.generation.wrapping_add(1).max(1);
         (r.lanes, r.rays) = (lanes, Rays8Soa::new(o, d));
+        (r.o, r.d) = (*o, *d);
+    }
+
+    /// Lane `k`'s spans of ring torus `i` on `range` (with `first_only`, what
+    /// a nearest query needs), from the lane's prep made with every lane's
+    /// when the first lane asked, appended to `out`; returns where they stop
+    /// being exact, as [`LeafTable::spans_for`] does, or `None` when the lane
+    /// is not in the packet. The caller checks [`LeafTable::has_torus_prep`].
+    #[inline]
+    pub(crate) fn torus_lane<S: SpanSink + ?Sized>(
+        &self,
+        leaves: &LeafTable,
+        i: u32,
+        k: usize,
+        (range, first_only): ((f32, f32), bool),
+        out: &mut S,
+    ) -> Option<f32> {
+        let mut guard = self.leaf_solves.borrow_mut();
+        let r = &mut *guard;
+        if r.lanes & (1 << k) == 0 {
+            return None;
+        }
+        if r.tori.is_empty() {
+            r.tori.resize(TORUS_SLOTS, (0, 0, [None; 8]));
+        }
+        let e = &mut r.tori[i as usize % TORUS_SLOTS];
+        if e.0 != i || e.1 != r.generation {
+            counts::leaf_solve();
+            leaves.torus_prep8(i, (&r.o, &r.d), r.lanes, &mut e.2);
+            (e.0, e.1) = (i, r.generation);
+        }
+        counts::leaf_lane(true);
+        Some(leaves.torus_spans_prepped(i, e.2[k].as_ref(), range, first_only, out))
     }
 
     /// Lane `k`'s spans of leaf `i` on `range`, from the packet's solve of

@@ -287,6 +287,10 @@ fn leaf_spans<S: SpanSink + ?Sized>(
             if let Some(v) = memo.leaf_lane(leaves, i, k, (lo, hi), out) {
                 return v;
             }
+        } else if leaves.has_torus_prep(i) {
+            if let Some(v) = memo.torus_lane(leaves, i, k, ((lo, hi), nearest.is_some()), out) {
+                return v;
+            }
         } else if nearest.is_some() && memo.len > 0 {
             if let Some(v) = memo.serve(k, i, lo, hi, out) {
                 return v;

@@ -99,8 +99,9 @@ impl TileProgram {
         self.follow_counts
     }
 
-    /// Has a leaf with a packet kernel ([`LeafTable::has_kernel8`]) been
-    /// kept since [`TileProgram::begin`] (or a node kept whole, whose leaves
+    /// Has a leaf with a packet kernel ([`LeafTable::has_kernel8`]) or a
+    /// packet prep (a ring torus, [`LeafTable::has_torus_prep`]) been kept
+    /// since [`TileProgram::begin`] (or a node kept whole, whose leaves
     /// were not looked at)?
     pub fn kernels8(&self) -> bool {
         self.kernels8
@@ -152,7 +153,7 @@ impl Spec<'_> {
         }
         if kind == NodeKind::Leaf {
             self.tp.counts.leaves_kept += 1;
-            self.tp.kernels8 |= self.leaves.has_kernel8(b.first[nu]);
+            self.tp.kernels8 |= self.leaves.has_kernel8(b.first[nu]) || self.leaves.has_torus_prep(b.first[nu]);
             return Some(n);
         }
         if depth >= MAX_DEPTH {

@@ -356,6 +356,7 @@ pub struct TorusAsk {
 
 /// The line `o + t d` in the torus' frame as the quartic sees it: origin at
 /// the closest approach `oc` to the centre, unit direction `dn`, `s = t |d| - tc`.
+#[derive(Clone, Copy, Debug)]
 struct TorusLine {
     dl: f64,
     dn: DVec3,
@@ -446,11 +447,65 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
     if rho >= 1.0 {
         return (torus_by_midpoints(o, d, shape, out), f32::INFINITY);
     }
-    let Some(line) = TorusLine::new(o, d, rho) else { return (0, f32::INFINITY) };
-    let c = line.quartic(rho);
+    match TorusPrep::new(o, d, rho) {
+        Some(prep) => torus_query_prepped(&prep, shape, ask, out),
+        None => (0, f32::INFINITY),
+    }
+}
+
+/// What a ring torus's query computes before it looks at the query's range:
+/// the line in the torus's frame, the quartic and its marks (the roots of
+/// its derivative, a cubic). A packet makes it for its eight lanes together
+/// ([`TorusPrep::lanes`]), each step for every lane before the next step,
+/// so that one lane's chain of square roots and divisions overlaps the
+/// next's; each lane's query then finishes from its own prep. The same
+/// numbers as [`torus_query`], which makes and uses it the same way.
+#[derive(Clone, Copy, Debug)]
+pub struct TorusPrep {
+    line: TorusLine,
+    c: [f64; 3],
+    marks: quartic::Marks,
+}
+
+impl TorusPrep {
+    /// `None` when the line misses the torus's bounding sphere or slab
+    /// (no spans). For a ring torus (`rho < 1`) only.
+    #[inline(always)]
+    pub fn new(o: DVec3, d: DVec3, rho: f64) -> Option<TorusPrep> {
+        let line = TorusLine::new(o, d, rho)?;
+        let c = line.quartic(rho);
+        Some(TorusPrep { line, c, marks: quartic::Marks::new(&c, line.h) })
+    }
+
+    /// [`TorusPrep::new`] for the lines `(o[k], d[k])` of the lanes `k` in
+    /// `lanes` (`None` for the others), step by step over the lanes (the
+    /// steps of one lane depend on each other; the lanes do not).
+    pub fn lanes(o: &[DVec3; 8], d: &[DVec3; 8], rho: f64, lanes: u32, out: &mut [Option<TorusPrep>; 8]) {
+        let mut line: [Option<TorusLine>; 8] = [None; 8];
+        for k in 0..8 {
+            if lanes & (1 << k) != 0 {
+                line[k] = TorusLine::new(o[k], d[k], rho);
+            }
+        }
+        let mut c = [[0.0f64; 3]; 8];
+        for k in 0..8 {
+            if let Some(l) = &line[k] {
+                c[k] = l.quartic(rho);
+            }
+        }
+        for k in 0..8 {
+            out[k] = line[k].map(|l| TorusPrep { line: l, c: c[k], marks: quartic::Marks::new(&c[k], l.h) });
+        }
+    }
+}
+
+/// [`torus_query`] of a ring torus from its [`TorusPrep`].
+pub fn torus_query_prepped(prep: &TorusPrep, shape: (f32, f64), ask: TorusAsk, out: &mut [(f32, f32); 3]) -> (usize, f32) {
+    let rho = shape.0 as f64;
+    let (line, c) = (&prep.line, prep.c);
     let eps = shape.1 * rho;
     let mut runs = [(quartic::RunEnd::Exact(0.0), quartic::RunEnd::Exact(0.0)); 3];
-    let nr = quartic::negative_runs(&c, line.h, &mut runs);
+    let nr = quartic::negative_runs(&prep.marks, &mut runs);
     let (w_lo, w_hi) = line.window(ask.range);
     let (tmin, tmax) = ask.range;
     let mut count = 0;

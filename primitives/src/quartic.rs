@@ -160,14 +160,16 @@ fn seed(c: &[f64; 3], (a, fa, flat_a): (f64, f64, bool), (b, fb, flat_b): (f64, 
 /// The quartic's breakpoints on `[-h, h]`, increasing: the ends and the
 /// critical points strictly inside, with the values there. Between two
 /// consecutive ones the quartic is monotone.
-struct Marks {
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Marks {
     x: [f64; 5],
     f: [f64; 5],
     n: usize,
 }
 
 impl Marks {
-    fn new(c: &[f64; 3], h: f64) -> Marks {
+    #[inline]
+    pub(crate) fn new(c: &[f64; 3], h: f64) -> Marks {
         let mut crit = [0.0f64; 3];
         let nc = depressed_cubic_roots(0.5 * c[2], 0.25 * c[1], &mut crit);
         let mut m = Marks { x: [-h; 5], f: [q(c, -h); 5], n: 1 };
@@ -192,7 +194,7 @@ impl Marks {
 }
 
 /// A monotone piece whose ends' values have opposite signs: one root inside.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub(crate) struct Piece {
     a: (f64, f64, bool),
     b: (f64, f64, bool),
@@ -260,7 +262,7 @@ pub fn depressed_quartic_roots(c: &[f64; 3], h: f64, eps: f64, out: &mut [f64; 4
 
 /// An end of a run where the quartic is negative: a point where it is 0, or
 /// a root not polished yet, in its piece.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub(crate) enum RunEnd {
     /// Exactly here (a mark where q is 0, or an end of `[-h, h]`).
     Exact(f64),
@@ -304,7 +306,8 @@ impl RunEnd {
     }
 }
 
-/// The runs where `s^4 + c[2] s^2 + c[1] s + c[0] < 0` on `[-h, h]`, as
+/// The runs where `s^4 + c[2] s^2 + c[1] s + c[0] < 0` on `[-h, h]` (`h > 0`),
+/// from the quartic's marks there ([`Marks::new`]), as
 /// (start, end) pairs, increasing, none polished yet (the caller polishes
 /// only the ends it needs); returns how many (at most 3: a quartic has at
 /// most two such runs, rounding at the ends may add one).
@@ -312,11 +315,8 @@ impl RunEnd {
 /// Each monotone piece between marks is negative before or after its root
 /// as its ends' values say; a mark where q is 0 separates the runs only when
 /// the sign differs on its two sides (a touching double root joins nothing).
-pub(crate) fn negative_runs(c: &[f64; 3], h: f64, out: &mut [(RunEnd, RunEnd); 3]) -> usize {
-    if !(h > 0.0) {
-        return 0;
-    }
-    let m = Marks::new(c, h);
+pub(crate) fn negative_runs(m: &Marks, out: &mut [(RunEnd, RunEnd); 3]) -> usize {
+    let h = m.x[m.n - 1];
     let mut runs = Runs { out, n: 0, inside: false, open: RunEnd::Exact(-h) };
     for j in 0..m.n - 1 {
         let (fa, fb) = (m.f[j], m.f[j + 1]);

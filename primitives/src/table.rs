@@ -810,6 +810,49 @@ impl LeafTable {
         valid
     }
 
+    /// Is leaf `i` a ring torus, whose queries a packet can prepare for its
+    /// eight lanes at once ([`LeafTable::torus_prep8`])?
+    #[inline]
+    pub fn has_torus_prep(&self, i: u32) -> bool {
+        self.kind[i as usize] == LeafKind::Torus && self.p0[i as usize].x < 1.0
+    }
+
+    /// The [`kernels::TorusPrep`] of ring torus `i` (see
+    /// [`LeafTable::has_torus_prep`]) for the world rays `(o[k], d[k])` of
+    /// the lanes in `lanes`; `None` where a lane's line misses it.
+    pub fn torus_prep8(&self, i: u32, (o, d): (&[Vec3; 8], &[Vec3; 8]), lanes: u32, out: &mut [Option<kernels::TorusPrep>; 8]) {
+        let iu = i as usize;
+        let (mut lo, mut ld) = ([DVec3::ZERO; 8], [DVec3::ZERO; 8]);
+        for k in 0..8 {
+            if lanes & (1 << k) != 0 {
+                (lo[k], ld[k]) = self.line64_of(iu, o[k], d[k]);
+            }
+        }
+        kernels::TorusPrep::lanes(&lo, &ld, self.p0[iu].x as f64, lanes, out);
+    }
+
+    /// [`LeafTable::torus_spans`] of ring torus `i` from the ray's
+    /// [`kernels::TorusPrep`] (`None`: the line misses it): the same spans
+    /// and the same return value.
+    pub fn torus_spans_prepped<S: SpanSink + ?Sized>(
+        &self,
+        i: u32,
+        prep: Option<&kernels::TorusPrep>,
+        range: (f32, f32),
+        first_only: bool,
+        out: &mut S,
+    ) -> f32 {
+        let Some(prep) = prep else { return f32::INFINITY };
+        let iu = i as usize;
+        let mut buf = [(0.0f32, 0.0f32); 3];
+        let ask = kernels::TorusAsk { range, first_only };
+        let (n, valid) = kernels::torus_query_prepped(prep, (self.p0[iu].x, self.torus_tol), ask, &mut buf);
+        for &(a, b) in &buf[..n] {
+            push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, range.0, range.1);
+        }
+        valid
+    }
+
     /// The spans of ball `i` (kind [`LeafKind::Sphere`]) along the world ray.
     #[inline(always)]
     fn ball_spans<S: SpanSink + ?Sized>(&self, i: u32, ray: &Ray, (tmin, tmax): (f32, f32), out: &mut S) {

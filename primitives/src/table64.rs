@@ -104,7 +104,13 @@ impl LeafTable {
     /// The world ray as a local line `(origin, direction)` in leaf `iu`'s f64 frame.
     #[inline(always)]
     pub(crate) fn line64(&self, iu: usize, ray: &Ray) -> (DVec3, DVec3) {
-        (self.local64(iu, ray.origin), map64(&self.maps64[self.ext[iu] as usize].0, ray.dir.as_dvec3()))
+        self.line64_of(iu, ray.origin, ray.dir)
+    }
+
+    /// [`LeafTable::line64`] of the world line `o + t d`.
+    #[inline(always)]
+    pub(crate) fn line64_of(&self, iu: usize, o: Vec3, d: Vec3) -> (DVec3, DVec3) {
+        (self.local64(iu, o), map64(&self.maps64[self.ext[iu] as usize].0, d.as_dvec3()))
     }
 
     /// The spans of an ellipsoid, cylinder or cone along the world ray.
