@@ -9,8 +9,8 @@
 //!
 //! Anything else structural (a node's children changed, `Hidden` or
 //! `ObjectOrder` changed on an object, a member left behind by a despawned
-//! root, a new node over an old entity) takes the general path, which lists
-//! the objects again.
+//! root, a new node over an old entity, a node or solid of no object
+//! despawned) takes the general path, which lists the objects again.
 
 use hecs::{Entity, World};
 use rothray_primitives::Aabb;
@@ -67,9 +67,17 @@ pub(super) fn classify(world: &World, changes: &Changes, live: &LiveState) -> Op
     let (mut dead, mut fresh, mut changed) = (Vec::new(), EntitySet::default(), EntitySet::default());
     for &e in &changes.dirty {
         if !world.contains(e) {
+            let mut owners = live.owners.roots(e).peekable();
             if live.index.contains_key(&e) {
                 dead.push(e);
-            } else if live.owners.roots(e).any(|r| world.contains(r)) {
+            } else if owners.peek().is_none() {
+                // A node of no object went (a hidden tree's: its
+                // children, nobody's now, may be objects of their own),
+                // or a hidden solid: only a listing tells.
+                if structural.contains(&e) {
+                    return None;
+                }
+            } else if owners.any(|r| world.contains(r)) {
                 return None; // a member of a living object went
             }
             continue;

@@ -651,3 +651,37 @@ fn live_meshes_sync_by_object_like_a_fresh_bake() {
     }
     assert!(total.in_place > 0 && total.appended > 0 && total.births > 0, "every path ran: {total:?}");
 }
+
+#[test]
+fn a_hidden_root_despawned_without_its_children_leaves_them_as_objects() {
+    // A CSG root is hidden (its tree belongs to no object), then despawned
+    // alone: its children are nobody's children any more, so they become
+    // objects of their own, as a fresh bake says.
+    let seed = seed_from_env(4242);
+    let mut rng = SmallRng::seed_from_u64(seed);
+    for listed in [false, true] {
+        let mut world = World::new();
+        let others: Vec<Entity> = (0..3).map(|_| spawn_leaf(&mut world, &mut rng, 6.0)).collect();
+        let kids: Vec<Entity> = (0..2).map(|_| spawn_leaf(&mut world, &mut rng, 0.8)).collect();
+        let root = world.spawn((CsgNode::union(kids.clone()), Transform::from_translation(v3(&mut rng, 2.0))));
+        let mut scene = RenderScene::default();
+        sync_scene(&mut world, &mut scene).unwrap();
+        let steps: [(&str, Box<dyn Fn(&mut World)>); 2] = [
+            ("hide the root", Box::new(move |w: &mut World| w.insert_one(root, Hidden).unwrap())),
+            ("despawn the hidden root alone", Box::new(move |w: &mut World| w.despawn(root).unwrap())),
+        ];
+        for (what, step) in steps {
+            step(&mut world);
+            if listed {
+                sync_scene_touched(&mut world, &mut scene, &[root]).unwrap();
+            } else {
+                sync_scene(&mut world, &mut scene).unwrap();
+            }
+            let fresh = RenderScene::from_world(&world).unwrap();
+            let what = format!("seed {seed} listed {listed}: {what}");
+            assert_eq!(scene.objects.len(), fresh.objects.len(), "{what}: objects");
+            compare(&scene, &fresh, &mut rng, &what);
+        }
+        let _ = others;
+    }
+}
