@@ -661,17 +661,19 @@ fn a_hidden_root_despawned_without_its_children_leaves_them_as_objects() {
     let mut rng = SmallRng::seed_from_u64(seed);
     for listed in [false, true] {
         let mut world = World::new();
-        let others: Vec<Entity> = (0..3).map(|_| spawn_leaf(&mut world, &mut rng, 6.0)).collect();
+        for _ in 0..3 {
+            spawn_leaf(&mut world, &mut rng, 6.0);
+        }
         let kids: Vec<Entity> = (0..2).map(|_| spawn_leaf(&mut world, &mut rng, 0.8)).collect();
-        let root = world.spawn((CsgNode::union(kids.clone()), Transform::from_translation(v3(&mut rng, 2.0))));
+        let root = world.spawn((CsgNode::union(kids), Transform::from_translation(v3(&mut rng, 2.0))));
         let mut scene = RenderScene::default();
         sync_scene(&mut world, &mut scene).unwrap();
-        let steps: [(&str, Box<dyn Fn(&mut World)>); 2] = [
-            ("hide the root", Box::new(move |w: &mut World| w.insert_one(root, Hidden).unwrap())),
-            ("despawn the hidden root alone", Box::new(move |w: &mut World| w.despawn(root).unwrap())),
-        ];
-        for (what, step) in steps {
-            step(&mut world);
+        for what in ["hide the root", "despawn the hidden root alone"] {
+            if what.starts_with("hide") {
+                world.insert_one(root, Hidden).unwrap();
+            } else {
+                world.despawn(root).unwrap();
+            }
             if listed {
                 sync_scene_touched(&mut world, &mut scene, &[root]).unwrap();
             } else {
@@ -682,6 +684,5 @@ fn a_hidden_root_despawned_without_its_children_leaves_them_as_objects() {
             assert_eq!(scene.objects.len(), fresh.objects.len(), "{what}: objects");
             compare(&scene, &fresh, &mut rng, &what);
         }
-        let _ = others;
     }
 }
