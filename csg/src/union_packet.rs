@@ -16,7 +16,7 @@
 use glam::Vec4;
 use rothray_primitives::{
     box_wide::{forms_packet, BoxWide, Lanes8, Rays8, Visit8},
-    LeafTable, Ray,
+    Aabb, LeafTable, Ray,
 };
 
 use super::{cand_key, cand_of_key, counts, sort_keys, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
@@ -215,9 +215,14 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
     // is compiled with the walk's AVX.
     #[inline(always)]
     fn visit(&mut self, pos: u32, lanes: u32, rays: &Lanes8) {
-        // Each lane's entry into the child's own box, as `child_entry` gives it.
         let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
-        let (hit, t0) = rays.ray_range(&self.prog.bounds[c as usize], &self.tmin, &self.tmax);
+        self.visit_box(pos, &self.prog.bounds[c as usize], lanes, rays)
+    }
+
+    #[inline(always)]
+    fn visit_box(&mut self, pos: u32, b: &Aabb, lanes: u32, rays: &Lanes8) {
+        // Each lane's entry into the child's own box, as `child_entry` gives it.
+        let (hit, t0) = rays.ray_range(b, &self.tmin, &self.tmax);
         let mut m = hit & lanes;
         while m != 0 {
             let k = m.trailing_zeros() as usize;

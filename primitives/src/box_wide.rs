@@ -41,6 +41,13 @@ pub trait Visit8 {
     /// The ranges of the lanes `lanes` meet the leaf box of payload `id`
     /// (`rays` tests the payload's own box exactly).
     fn visit(&mut self, id: u32, lanes: u32, rays: &Lanes8);
+    /// [`Visit8::visit`] of payload `id` whose box `b` the caller has at
+    /// hand (a list that keeps its payloads' boxes).
+    #[inline(always)]
+    fn visit_box(&mut self, id: u32, b: &Aabb, lanes: u32, rays: &Lanes8) {
+        let _ = b;
+        self.visit(id, lanes, rays)
+    }
     /// Every box not visited yet is entered at `lower` or later by every
     /// lane (`+inf`: the walk is over); the caller may shrink lanes' range
     /// ends `thi`, which prunes their later boxes.
@@ -259,12 +266,18 @@ impl BoxWide {
     /// `v.settle(+inf)`. The visitor's own exact box tests make the same
     /// visits count as a walk's. Returns `false`, having visited nothing,
     /// where [`walk8`](Self::walk8) would.
-    pub fn visit_listed(rays: &Rays8, active: u32, thi: &mut [f32; 8], ids: impl Iterator<Item = u32>, v: &mut impl Visit8) -> bool {
+    pub fn visit_listed<'b>(
+        rays: &Rays8,
+        active: u32,
+        thi: &mut [f32; 8],
+        ids: impl Iterator<Item = (u32, &'b Aabb)>,
+        v: &mut impl Visit8,
+    ) -> bool {
         let Some(p) = Packet8::new(rays.o, rays.d) else { return false };
         if active != 0 {
             let lanes = Lanes8 { p: &p };
-            for id in ids {
-                v.visit(id, active, &lanes);
+            for (id, b) in ids {
+                v.visit_box(id, b, active, &lanes);
             }
         }
         v.settle(f32::INFINITY, thi);
