@@ -52,13 +52,17 @@ impl TileList {
 
     /// The children that the rays `(o[k], d[k])` of the lanes `lanes` can
     /// meet, with their boxes, or `None` when a lane's ray is not a ray of
-    /// `plane` (or its point is not finite: [`RayPlane::point`]).
+    /// `plane` (or its point is not finite: [`RayPlane::point`]). `met` is
+    /// scratch: the indices of those children in the list, written without
+    /// a branch per child (whether a child's shadow meets the packet's box
+    /// is hard to predict; the list is filtered first, then walked).
     #[inline]
     pub(crate) fn for_rays<'a>(
         &'a self,
         plane: &RayPlane,
         (o, d): (&[Vec3; 8], &[Vec3; 8]),
         lanes: u32,
+        met: &'a mut Vec<u32>,
     ) -> Option<impl Iterator<Item = (u32, &'a Aabb)> + 'a> {
         let mut pts = [[0.0f64; 2]; 8];
         let mut n = 0;
@@ -70,6 +74,14 @@ impl TileList {
         }
         let pb =
             RayPlane::points_box(pts[..n].iter().copied()).unwrap_or([f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY]);
-        Some(self.pos.iter().zip(&self.shadows).zip(&self.boxes).filter(move |((_, s), _)| meets(&pb, s)).map(|((&p, _), b)| (p, b)))
+        met.clear();
+        met.resize(self.shadows.len(), 0);
+        let mut m = 0;
+        for (i, s) in self.shadows.iter().enumerate() {
+            met[m] = i as u32;
+            m += meets(&pb, s) as usize;
+        }
+        met.truncate(m);
+        Some(met.iter().map(move |&i| (self.pos[i as usize], &self.boxes[i as usize])))
     }
 }

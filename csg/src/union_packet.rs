@@ -36,6 +36,8 @@ pub(crate) struct UnionRecords {
     cands: Vec<Vec<u64>>,
     leaf: SpanList,
     tmp: SpanList,
+    /// The tile list's children a packet can meet (`TileList::for_rays`).
+    met: Vec<u32>,
 }
 
 impl UnionRecords {
@@ -145,7 +147,7 @@ impl UnionRecords {
         let rays = Rays8 { o: &o, d: &d, tmin: &tmin };
         // The tile's list when it made one and the lanes' rays are its own
         // (it lists every child whose box they can meet), else the tree.
-        let listed = prog.list_of(n).and_then(|(l, plane)| l.for_rays(plane, (&o, &d), lanes));
+        let listed = prog.list_of(n).and_then(|(l, plane)| l.for_rays(plane, (&o, &d), lanes, &mut self.met));
         match listed {
             Some(ids) => BoxWide::visit_listed(&rays, lanes, &mut thi, ids, &mut walk),
             None => w.packet.walk8(&rays, lanes, &mut thi, &mut walk),
