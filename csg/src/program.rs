@@ -338,33 +338,6 @@ pub(crate) fn cand_of_key(k: u64) -> (u32, f32) {
     (k as u32, f32::from_bits(b))
 }
 
-/// Sorts candidate keys ([`cand_key`]). Up to 8 by rank: each key goes to
-/// the place that the number of keys before it says (equal keys by their
-/// place), with no branch that depends on the keys; an insertion sort's
-/// compares were a fifth of a packet's union walk on forest (perf), its
-/// inner loop hard to predict.
-#[inline]
-pub(crate) fn sort_keys(s: &mut [u64]) {
-    let n = s.len();
-    if n <= 1 {
-        return;
-    }
-    if n <= 8 {
-        let mut tmp = [0u64; 8];
-        tmp[..n].copy_from_slice(s);
-        for i in 0..n {
-            let ki = tmp[i];
-            let mut r = 0;
-            for (j, &kj) in tmp[..n].iter().enumerate() {
-                r += ((kj < ki) | ((kj == ki) & (j < i))) as usize;
-            }
-            s[r] = ki;
-        }
-        return;
-    }
-    sort_short_by_key(s, |&k| k);
-}
-
 /// Sorts candidates by entry, then position: a total order, so they are
 /// taken in the same order whichever tree listed them.
 #[inline]
@@ -1222,33 +1195,3 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
 mod leaf_packet;
 #[path = "union_packet.rs"]
 mod union_packet;
-
-#[cfg(test)]
-mod sort_tests {
-    use super::{cand_key, sort_keys};
-    use rand::{rngs::SmallRng, Rng, SeedableRng};
-
-    #[test]
-    fn sort_keys_sorts_like_the_standard_sort() {
-        // Lengths 0 to 20 (the rank sort up to 8, insertion and the
-        // standard sort above), keys drawn from a small pool so that some
-        // repeat, and real candidate keys (negative, zero and infinite entries).
-        let seed = 0x5047u64;
-        println!("seed {seed:#x}");
-        let mut rng = SmallRng::seed_from_u64(seed);
-        for round in 0..20_000 {
-            let n = rng.gen_range(0..=20);
-            let pool: Vec<u64> = (0..rng.gen_range(1..12))
-                .map(|_| {
-                    let t = [-1.5f32, -0.0, 0.0, 0.25, 3.0, f32::INFINITY][rng.gen_range(0..6)];
-                    cand_key(rng.gen_range(0..6), t)
-                })
-                .collect();
-            let mut s: Vec<u64> = (0..n).map(|_| pool[rng.gen_range(0..pool.len())]).collect();
-            let mut want = s.clone();
-            want.sort_unstable();
-            sort_keys(&mut s);
-            assert_eq!(s, want, "round {round}");
-        }
-    }
-}
