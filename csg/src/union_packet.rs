@@ -206,7 +206,7 @@ struct LaneWalks<'p, 'c, 's> {
     /// Per lane, the smallest entry among its `cands`.
     first: [f32; 8],
     /// Per lane, the children listed and not visited yet, as keys
-    /// ([`cand_key`]: sorting them is sorting integers).
+    /// ([`cand_key`]: their order is that of integers).
     cands: &'s mut [Vec<u64>],
     accs: &'s mut [SpanList],
     lists: (&'s mut SpanList, &'s mut SpanList),
