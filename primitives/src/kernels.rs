@@ -479,7 +479,10 @@ impl TorusPrep {
 
     /// [`TorusPrep::new`] for the lines `(o[k], d[k])` of the lanes `k` in
     /// `lanes` (`None` for the others), step by step over the lanes (the
-    /// steps of one lane depend on each other; the lanes do not).
+    /// steps of one lane depend on each other; the lanes do not). Calling
+    /// `new` per lane instead was 3-5% slower on tori (960x540, one thread,
+    /// best of 9 in six alternating rounds: 0.0684-0.0701 s against
+    /// 0.0716-0.0744 s in five of them).
     pub fn lanes(o: &[DVec3; 8], d: &[DVec3; 8], rho: f64, lanes: u32, out: &mut [Option<TorusPrep>; 8]) {
         let mut line: [Option<TorusLine>; 8] = [None; 8];
         for k in 0..8 {
