@@ -804,9 +804,7 @@ impl LeafTable {
         let mut buf = [(0.0f32, 0.0f32); 3];
         let ask = kernels::TorusAsk { range, first_only };
         let (n, valid) = kernels::torus_query(lo, ld, (self.p0[iu].x, self.torus_tol), ask, &mut buf);
-        for &(a, b) in &buf[..n] {
-            push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, range.0, range.1);
-        }
+        push_torus_spans(i, &buf[..n], range, out);
         valid
     }
 
@@ -847,9 +845,7 @@ impl LeafTable {
         let mut buf = [(0.0f32, 0.0f32); 3];
         let ask = kernels::TorusAsk { range, first_only };
         let (n, valid) = kernels::torus_query_prepped(prep, (self.p0[iu].x, self.torus_tol), ask, &mut buf);
-        for &(a, b) in &buf[..n] {
-            push_clipped(out, Span { t0: a, s0: Surf::new(i, 0), t1: b, s1: Surf::new(i, 0) }, range.0, range.1);
-        }
+        push_torus_spans(i, &buf[..n], range, out);
         valid
     }
 
@@ -1154,6 +1150,14 @@ fn unit(n: Vec3) -> Vec3 {
         return n.normalize_or(Vec3::Y);
     }
     n.as_dvec3().try_normalize().map_or(Vec3::Y, |n| n.as_vec3())
+}
+
+/// Torus `i`'s spans `(t0, t1)` (its one surface at both ends), clipped to `range`.
+#[inline(always)]
+fn push_torus_spans<S: SpanSink + ?Sized>(i: u32, spans: &[(f32, f32)], range: (f32, f32), out: &mut S) {
+    for &(t0, t1) in spans {
+        push_clipped(out, Span { t0, s0: Surf::new(i, 0), t1, s1: Surf::new(i, 0) }, range.0, range.1);
+    }
 }
 
 /// Clips `[t0, t1]` to `[tmin, tmax]` and pushes it if it keeps a positive length.
