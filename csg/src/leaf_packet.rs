@@ -64,6 +64,7 @@ impl PacketMemo {
         let r = self.leaf_solves.get_mut();
         if r.slots.is_empty() {
             r.slots.resize(SLOTS, (0, 0, Ranges8::default()));
+            r.tori.resize(TORUS_SLOTS, (0, 0, [None; 8]));
         }
         r.generation = r.generation.wrapping_add(1).max(1);
         (r.lanes, r.rays) = (lanes, Rays8Soa::new(o, d));
@@ -85,21 +86,13 @@ impl PacketMemo {
         out: &mut S,
     ) -> Option<f32> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let r = &mut *guard;
-        if r.lanes & (1 << k) == 0 {
+        let LeafRecords { lanes, generation, o, d, tori, .. } = &mut *guard;
+        if *lanes & (1 << k) == 0 {
             return None;
         }
-        if r.tori.is_empty() {
-            r.tori.resize(TORUS_SLOTS, (0, 0, [None; 8]));
-        }
-        let e = &mut r.tori[i as usize % TORUS_SLOTS];
-        if e.0 != i || e.1 != r.generation {
-            counts::leaf_solve();
-            leaves.torus_prep8(i, (&r.o, &r.d), r.lanes, &mut e.2);
-            (e.0, e.1) = (i, r.generation);
-        }
+        let preps = record(tori, i, *generation, |p| leaves.torus_prep8(i, (o, d), *lanes, p));
         counts::leaf_lane(true);
-        Some(leaves.torus_spans_prepped(i, e.2[k].as_ref(), range, first_only, out))
+        Some(leaves.torus_spans_prepped(i, preps[k].as_ref(), range, first_only, out))
     }
 
     /// Lane `k`'s spans of leaf `i` on `range`, from the packet's solve of
@@ -118,17 +111,11 @@ impl PacketMemo {
         out: &mut S,
     ) -> Option<f32> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let r = &mut *guard;
-        if r.lanes & (1 << k) == 0 {
+        let LeafRecords { lanes, rays, generation, slots, .. } = &mut *guard;
+        if *lanes & (1 << k) == 0 {
             return None;
         }
-        let e = &mut r.slots[i as usize % SLOTS];
-        if e.0 != i || e.1 != r.generation {
-            counts::leaf_solve();
-            leaves.ranges8(i, &r.rays, r.lanes, &mut e.2);
-            (e.0, e.1) = (i, r.generation);
-        }
-        let e = &e.2;
+        let e = &*record(slots, i, *generation, |e| leaves.ranges8(i, rays, *lanes, e));
         let done = e.done & (1 << k) != 0;
         counts::leaf_lane(done);
         if !done {
@@ -140,4 +127,19 @@ impl PacketMemo {
         }
         Some(f32::INFINITY)
     }
+}
+
+/// Leaf `i`'s record for this packet in the direct-mapped `table` (of a
+/// power-of-two length), made by `fill` when its slot holds another leaf's
+/// record or an earlier packet's.
+#[inline(always)]
+fn record<T>(table: &mut [(u32, u32, T)], i: u32, generation: u32, fill: impl FnOnce(&mut T)) -> &mut T {
+    debug_assert!(table.len().is_power_of_two());
+    let e = &mut table[i as usize & (table.len() - 1)];
+    if e.0 != i || e.1 != generation {
+        counts::leaf_solve();
+        fill(&mut e.2);
+        (e.0, e.1) = (i, generation);
+    }
+    &mut e.2
 }
