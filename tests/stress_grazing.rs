@@ -162,6 +162,16 @@ fn families(c: DVec3, s: f64) -> Vec<Family> {
     let octa_w = octa_mesh_winding(oc, or, 2);
     let octa_w_shear = sheared(octa_mesh_winding(DVec3::ZERO, 0.5, 2));
     let fam = |name, shape, aim: Box<dyn Fn(&mut SmallRng) -> Aim>| Family { name, shape, near: c, size: 1.5 * s, aim, in_plane: None };
+    // The untransformed octahedron, its rays aimed at its faces, those lying
+    // in a face's plane set aside.
+    let octa_fam = |name, shape| Family {
+        name,
+        shape,
+        near: oc,
+        size: 1.5 * s,
+        aim: Box::new(move |r: &mut SmallRng| octa_aim(r, oc, or)),
+        in_plane: Some(Box::new(move |o, d| octa_in_plane(o, d, oc, or))),
+    };
     vec![
         fam("box faces (axis-aligned)", bx.clone(), Box::new(move |r| axis.face(r))),
         fam("box edges (axis-aligned)", bx, Box::new(move |r| axis.edge(r))),
@@ -171,24 +181,10 @@ fn families(c: DVec3, s: f64) -> Vec<Family> {
         fam("box edges (sheared matrix)", shear_box, Box::new(move |r| shear_slabs.edge(r))),
         fam("plane", plane, Box::new(move |r| plane_aim(r, (qw, nw), DAffine3::IDENTITY, s))),
         fam("plane (sheared matrix)", shear_plane, Box::new(move |r| plane_aim(r, (ql, nl), shear, 1.0))),
-        Family {
-            name: "mesh octahedron faces",
-            shape: octa,
-            near: oc,
-            size: 1.5 * s,
-            aim: Box::new(move |r| octa_aim(r, oc, or)),
-            in_plane: Some(Box::new(move |o, d| octa_in_plane(o, d, oc, or))),
-        },
+        octa_fam("mesh octahedron faces", octa),
         fam("mesh octahedron faces (rotated, scaled)", octa_rot, Box::new(move |r| octa_aim_xf(r, rot, 0.5))),
         fam("mesh octahedron faces (sheared matrix)", octa_shear, Box::new(move |r| octa_aim_xf(r, shear, 0.5))),
-        Family {
-            name: "mesh octahedron faces (winding rule)",
-            shape: octa_w,
-            near: oc,
-            size: 1.5 * s,
-            aim: Box::new(move |r| octa_aim(r, oc, or)),
-            in_plane: Some(Box::new(move |o, d| octa_in_plane(o, d, oc, or))),
-        },
+        octa_fam("mesh octahedron faces (winding rule)", octa_w),
         fam("mesh octahedron faces (winding rule, sheared matrix)", octa_w_shear, Box::new(move |r| octa_aim_xf(r, shear, 0.5))),
     ]
 }
