@@ -76,7 +76,10 @@ impl PacketMemo {
     /// when the first lane asked, appended to `out`; returns where they stop
     /// being exact, as [`LeafTable::spans_for`] does, or `None` when the lane
     /// is not in the packet. The caller checks [`LeafTable::has_torus_prep`].
-    #[inline]
+    // Inlined into the evaluator like `leaf_lane` (the preps are made out
+    // of line, `torus_prep8`): tori -2.2% instructions flat, -2.0% lit
+    // (callgrind, 480x270).
+    #[inline(always)]
     pub(crate) fn torus_lane<S: SpanSink + ?Sized>(
         &self,
         leaves: &LeafTable,
