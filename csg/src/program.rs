@@ -652,6 +652,7 @@ impl Program {
     /// objects of one ray are asked on shrinking ranges: a copy of the ray
     /// context per object, read back by the kernels right after it is
     /// written, stalled on store forwarding; see `LeafTable::spans_in`).
+    #[inline(always)]
     pub fn eval_in(&self, leaves: &LeafTable, root: u32, ctx: &RayCtx, range: (f32, f32), mode: Mode, scratch: &mut Scratch) -> f32 {
         let (tmin, tmax) = range;
         scratch.out.clear();
@@ -659,6 +660,17 @@ impl Program {
             let v = leaf_spans(leaves, ctx, self.first[root as usize], (tmin, tmax), ctx.nearest(mode), &mut scratch.out);
             return v.min(tmax);
         }
+        self.eval_node(leaves, root, ctx, range, mode, scratch)
+    }
+
+    /// [`Program::eval_in`] of an inner node (`scratch.out` cleared). Out of
+    /// line, with the leaf case inlined at the callers: an object that is one
+    /// leaf (a torus, a ground box) no longer pays the call and register saves
+    /// of the whole evaluator (callgrind 480x270 flat: ground -6.1%, sampler
+    /// -3.1%, capsules -2.3%, tori -2.3%; nesting +0.4%).
+    #[inline(never)]
+    fn eval_node(&self, leaves: &LeafTable, root: u32, ctx: &RayCtx, range: (f32, f32), mode: Mode, scratch: &mut Scratch) -> f32 {
+        let (tmin, tmax) = range;
         let r = root as usize;
         if self.bounds[r].ray_range(ctx.ray.origin, ctx.ray.inv_dir, tmin, tmax).is_none() {
             return tmax;
