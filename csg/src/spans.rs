@@ -206,6 +206,27 @@ fn event(l: &[Span], k: usize) -> (f32, Surf) {
 /// * spans shorter than `eps` are dropped and spans closer than `eps` are merged;
 /// * surfaces of `b` that bound a difference are flipped.
 pub fn combine(op: Op, a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
+    // One copy of the merge per operation: Table 1, the fusing rule and the
+    // flip of b's surfaces are then fixed in each copy's event loop.
+    match op {
+        Op::Union => combine_op::<UNION>(a, b, eps, out),
+        Op::Intersection => combine_op::<INTERSECTION>(a, b, eps, out),
+        Op::Difference => combine_op::<DIFFERENCE>(a, b, eps, out),
+    }
+}
+
+const UNION: u8 = Op::Union as u8;
+const INTERSECTION: u8 = Op::Intersection as u8;
+const DIFFERENCE: u8 = Op::Difference as u8;
+
+/// [`combine`] for the operation `OP` (`Op as u8`).
+#[inline(always)]
+fn combine_op<const OP: u8>(a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
+    let op = match OP {
+        UNION => Op::Union,
+        INTERSECTION => Op::Intersection,
+        _ => Op::Difference,
+    };
     out.clear();
     // Fast paths: nothing to merge.
     match op {
