@@ -184,13 +184,46 @@ impl Op {
     }
 }
 
-#[inline(always)]
-fn event(l: &[Span], k: usize) -> (f32, Surf) {
-    let s = &l[k >> 1];
-    if k & 1 == 0 {
-        (s.t0, s.s0)
-    } else {
-        (s.t1, s.s1)
+/// A span list read as its sequence of boundaries (events), for the merge.
+trait Events: Copy {
+    /// How many events (twice the spans).
+    fn count(self) -> usize;
+    /// Event `k` (`k < count()`): a span's start at even `k`, its end at odd.
+    fn event(self, k: usize) -> (f32, Surf);
+}
+
+impl Events for &[Span] {
+    #[inline(always)]
+    fn count(self) -> usize {
+        self.len() * 2
+    }
+
+    #[inline(always)]
+    fn event(self, k: usize) -> (f32, Surf) {
+        let s = &self[k >> 1];
+        if k & 1 == 0 {
+            (s.t0, s.s0)
+        } else {
+            (s.t1, s.s1)
+        }
+    }
+}
+
+/// A list of exactly one span, its events in registers: the merge of two
+/// such lists (an intersection of half-spaces, a leaf against a one-span
+/// result) is most of what `combine` does on scenes/polytopes.
+#[derive(Clone, Copy)]
+struct One([f32; 2], [Surf; 2]);
+
+impl Events for One {
+    #[inline(always)]
+    fn count(self) -> usize {
+        2
+    }
+
+    #[inline(always)]
+    fn event(self, k: usize) -> (f32, Surf) {
+        (self.0[k & 1], self.1[k & 1])
     }
 }
 
@@ -255,15 +288,31 @@ fn combine_op<const OP: u8>(a: &[Span], b: &[Span], eps: f32, out: &mut SpanList
             }
         }
     }
-    let na = a.len() * 2;
-    let nb = b.len() * 2;
+    if let ([x], [y]) = (a, b) {
+        let one = |s: &Span| One([s.t0, s.t1], [s.s0, s.s1]);
+        return merge_events::<OP, _, _>(one(x), one(y), eps, out);
+    }
+    merge_events::<OP, _, _>(a, b, eps, out)
+}
+
+/// The event loop of [`combine`] for the operation `OP` on two non-empty
+/// lists (`out` cleared).
+#[inline(always)]
+fn merge_events<const OP: u8, A: Events, B: Events>(a: A, b: B, eps: f32, out: &mut SpanList) {
+    let op = match OP {
+        UNION => Op::Union,
+        INTERSECTION => Op::Intersection,
+        _ => Op::Difference,
+    };
+    let na = a.count();
+    let nb = b.count();
     let (mut ia, mut ib) = (0usize, 0usize);
     let (mut ina, mut inb, mut inr) = (false, false, false);
     let mut start = (0.0f32, Surf::NONE);
     let flip_b = op == Op::Difference;
     while ia < na || ib < nb {
-        let (ta, sa) = if ia < na { event(a, ia) } else { (f32::INFINITY, Surf::NONE) };
-        let (tb, sb) = if ib < nb { event(b, ib) } else { (f32::INFINITY, Surf::NONE) };
+        let (ta, sa) = if ia < na { a.event(ia) } else { (f32::INFINITY, Surf::NONE) };
+        let (tb, sb) = if ib < nb { b.event(ib) } else { (f32::INFINITY, Surf::NONE) };
         let sb = if flip_b { sb.flip() } else { sb };
         let (t, surf);
         let (a_ok, b_ok) = (ia < na, ib < nb);
@@ -423,5 +472,60 @@ mod tests {
             assert_eq!((list.len(), list.is_empty(), list.last()), (model.len(), model.is_empty(), model.last()), "step {step}");
         }
         assert!(longest > 2 * INLINE_SPANS, "the lists should spill ({longest} spans at most)");
+    }
+
+    /// `combine` of two one-span lists (its `One` path) against the
+    /// general event loop on the same spans as slices, for every operation,
+    /// on spans built to meet every rule: shared and eps-near boundaries,
+    /// short spans and gaps, infinite and NaN ends, ends without surface,
+    /// flipped surfaces. A mutation of the `One` events (its end read as
+    /// its start) fails it.
+    #[test]
+    fn one_span_merge_is_the_general_loop() {
+        let seed = 0x0e5a_0001u64;
+        println!("seed {seed:#x}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let pool = [0.0f32, 1.0, 1.5, 2.0, f32::INFINITY, f32::NEG_INFINITY];
+        let param = |rng: &mut SmallRng, eps: f32| {
+            let t = pool[rng.gen_range(0..pool.len())];
+            match rng.gen_range(0..10) {
+                0 => rng.gen_range(-1.0..3.0f32),
+                1 => f32::NAN,
+                2..=4 => t + [0.5, 1.0, -1.0, 2.0][rng.gen_range(0..4)] * eps,
+                _ => t,
+            }
+        };
+        let surf = |rng: &mut SmallRng| match rng.gen_range(0..6) {
+            0 => Surf::NONE,
+            1 => Surf::new(rng.gen_range(0..4), 1).flip(),
+            _ => Surf::new(rng.gen_range(0..4), rng.gen_range(0..3)),
+        };
+        let (mut got, mut want) = (SpanList::new(), SpanList::new());
+        let mut merged = 0;
+        for case in 0..200_000 {
+            let eps = [0.0, 1e-3, 0.25][rng.gen_range(0..3)];
+            let span = |rng: &mut SmallRng| {
+                let (mut t0, mut t1) = (param(rng, eps), param(rng, eps));
+                if rng.gen_bool(0.8) && t1 < t0 {
+                    std::mem::swap(&mut t0, &mut t1);
+                }
+                Span { t0, t1, s0: surf(rng), s1: surf(rng) }
+            };
+            let (a, b) = (span(&mut rng), span(&mut rng));
+            for op in [Op::Union, Op::Intersection, Op::Difference] {
+                combine(op, &[a], &[b], eps, &mut got);
+                want.clear();
+                let (x, y): (&[Span], &[Span]) = (&[a], &[b]);
+                match op {
+                    Op::Union => merge_events::<UNION, _, _>(x, y, eps, &mut want),
+                    Op::Intersection => merge_events::<INTERSECTION, _, _>(x, y, eps, &mut want),
+                    Op::Difference => merge_events::<DIFFERENCE, _, _>(x, y, eps, &mut want),
+                }
+                let bits = |l: &SpanList| l.as_slice().iter().map(|s| (s.t0.to_bits(), s.t1.to_bits(), s.s0, s.s1)).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&want), "seed {seed:#x} case {case} {op:?}: {a:?} {b:?} eps {eps}");
+                merged += got.len();
+            }
+        }
+        assert!(merged > 100_000, "the cases should give spans ({merged})");
     }
 }
