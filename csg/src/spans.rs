@@ -215,6 +215,13 @@ impl Events for &[Span] {
 #[derive(Clone, Copy)]
 struct One([f32; 2], [Surf; 2]);
 
+impl One {
+    #[inline(always)]
+    fn of(s: &Span) -> One {
+        One([s.t0, s.t1], [s.s0, s.s1])
+    }
+}
+
 impl Events for One {
     #[inline(always)]
     fn count(self) -> usize {
@@ -289,8 +296,7 @@ fn combine_op<const OP: u8>(a: &[Span], b: &[Span], eps: f32, out: &mut SpanList
         }
     }
     if let ([x], [y]) = (a, b) {
-        let one = |s: &Span| One([s.t0, s.t1], [s.s0, s.s1]);
-        return merge_events::<OP, _, _>(one(x), one(y), eps, out);
+        return merge_events::<OP, _, _>(One::of(x), One::of(y), eps, out);
     }
     merge_events::<OP, _, _>(a, b, eps, out)
 }
@@ -388,6 +394,18 @@ fn union_fuse(a: (f32, Surf), b: (f32, Surf)) -> (f32, Surf) {
 /// In-place `acc = acc op b` using `tmp` as scratch.
 #[inline]
 pub fn combine_into(op: Op, acc: &mut SpanList, b: &[Span], eps: f32, tmp: &mut SpanList) {
+    if let ([x], [y]) = (acc.as_slice(), b) {
+        // Both spans are read into registers first: the result can go
+        // straight into `acc`, with no copy back from `tmp`.
+        let (x, y) = (One::of(x), One::of(y));
+        acc.clear();
+        match op {
+            Op::Union => merge_events::<UNION, _, _>(x, y, eps, acc),
+            Op::Intersection => merge_events::<INTERSECTION, _, _>(x, y, eps, acc),
+            Op::Difference => merge_events::<DIFFERENCE, _, _>(x, y, eps, acc),
+        }
+        return;
+    }
     combine(op, acc.as_slice(), b, eps, tmp);
     // Copy back the few spans in use; swapping moved two whole inline arrays
     // (2 x 200 bytes) and was ~10% of the logo scene's trace time. A spilled
@@ -474,8 +492,8 @@ mod tests {
         assert!(longest > 2 * INLINE_SPANS, "the lists should spill ({longest} spans at most)");
     }
 
-    /// `combine` of two one-span lists (its `One` path) against the
-    /// general event loop on the same spans as slices, for every operation,
+    /// `combine` and `combine_into` of two one-span lists (their `One`
+    /// paths) against the general event loop on the same spans as slices, for every operation,
     /// on spans built to meet every rule: shared and eps-near boundaries,
     /// short spans and gaps, infinite and NaN ends, ends without surface,
     /// flipped surfaces. A mutation of the `One` events (its end read as
@@ -523,6 +541,11 @@ mod tests {
                 }
                 let bits = |l: &SpanList| l.as_slice().iter().map(|s| (s.t0.to_bits(), s.t1.to_bits(), s.s0, s.s1)).collect::<Vec<_>>();
                 assert_eq!(bits(&got), bits(&want), "seed {seed:#x} case {case} {op:?}: {a:?} {b:?} eps {eps}");
+                // In place, as the evaluator merges into its accumulator.
+                let (mut acc, mut tmp) = (SpanList::new(), SpanList::new());
+                acc.push(a);
+                combine_into(op, &mut acc, &[b], eps, &mut tmp);
+                assert_eq!(bits(&acc), bits(&want), "seed {seed:#x} case {case} {op:?} in place: {a:?} {b:?} eps {eps}");
                 merged += got.len();
             }
         }
