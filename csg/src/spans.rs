@@ -296,9 +296,52 @@ fn combine_op<const OP: u8>(a: &[Span], b: &[Span], eps: f32, out: &mut SpanList
         }
     }
     if let ([x], [y]) = (a, b) {
-        return merge_events::<OP, _, _>(One::of(x), One::of(y), eps, out);
+        return merge_one::<OP>(One::of(x), One::of(y), eps, out);
     }
     merge_events::<OP, _, _>(a, b, eps, out)
+}
+
+/// [`merge_events`] of two one-span lists (`out` cleared). An intersection
+/// takes the loop's path in closed form: it enters once, at the later start
+/// (or at both, fused), and leaves at the earlier end (or both, fused), with
+/// the loop's own tests in the loop's order, so the same answers for every
+/// input (ends within eps, equal, infinite, NaN, inverted spans:
+/// `one_span_merge_is_the_general_loop`).
+#[inline(always)]
+fn merge_one<const OP: u8>(a: One, b: One, eps: f32, out: &mut SpanList) {
+    if OP != INTERSECTION {
+        return merge_events::<OP, _, _>(a, b, eps, out);
+    }
+    let span = |o: One| Span { t0: o.0[0], t1: o.0[1], s0: o.1[0], s1: o.1[1] };
+    let (a, b) = (span(a), span(b));
+    let fuse = |x: f32, y: f32| x == y || (x - y).abs() <= eps;
+    // One surface for two fused boundaries: a's, unless only b's is real.
+    let pick = |sa: Surf, sb: Surf| if !sa.is_real() && sb.is_real() { sb } else { sa };
+    let start = if fuse(a.t0, b.t0) {
+        (a.t0, pick(a.s0, b.s0))
+    } else if a.t0 < b.t0 {
+        // a enters first; b must enter before a leaves (a leaving with b
+        // entering, fused, is no overlap).
+        if fuse(a.t1, b.t0) || a.t1 < b.t0 {
+            return;
+        }
+        (b.t0, b.s0)
+    } else {
+        if fuse(a.t0, b.t1) || !(a.t0 < b.t1) {
+            return;
+        }
+        (a.t0, a.s0)
+    };
+    let end = if fuse(a.t1, b.t1) {
+        (a.t1, pick(a.s1, b.s1))
+    } else if a.t1 < b.t1 {
+        (a.t1, a.s1)
+    } else {
+        (b.t1, b.s1)
+    };
+    if end.0 - start.0 > eps {
+        out.push(Span { t0: start.0, t1: end.0, s0: start.1, s1: end.1 });
+    }
 }
 
 /// The event loop of [`combine`] for the operation `OP` on two non-empty
@@ -400,9 +443,9 @@ pub fn combine_into(op: Op, acc: &mut SpanList, b: &[Span], eps: f32, tmp: &mut 
         let (x, y) = (One::of(x), One::of(y));
         acc.clear();
         match op {
-            Op::Union => merge_events::<UNION, _, _>(x, y, eps, acc),
-            Op::Intersection => merge_events::<INTERSECTION, _, _>(x, y, eps, acc),
-            Op::Difference => merge_events::<DIFFERENCE, _, _>(x, y, eps, acc),
+            Op::Union => merge_one::<UNION>(x, y, eps, acc),
+            Op::Intersection => merge_one::<INTERSECTION>(x, y, eps, acc),
+            Op::Difference => merge_one::<DIFFERENCE>(x, y, eps, acc),
         }
         return;
     }
