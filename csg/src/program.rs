@@ -16,7 +16,7 @@ use rothray_primitives::{
 
 use crate::counts;
 use crate::edits::{Edit, EditLog};
-use crate::spans::{combine_into, Op, SpanList};
+use crate::spans::{combine_into, combine_into_call, Op, SpanList};
 use crate::tile_list::TileList;
 use rothray_primitives::ray_plane::RayPlane;
 
@@ -961,7 +961,7 @@ impl Program {
         if acc.is_empty() {
             acc.append(leaf.as_slice());
         } else {
-            combine_into(Op::Union, acc, leaf.as_slice(), ctx.eps, tmp);
+            combine_into_call(Op::Union, acc, leaf.as_slice(), ctx.eps, tmp);
         }
         if mode != Mode::All {
             if let Some(t) = stop_at_first_entry(acc, st.hi, mode, ctx.eps) {
