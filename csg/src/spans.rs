@@ -259,14 +259,20 @@ const UNION: u8 = Op::Union as u8;
 const INTERSECTION: u8 = Op::Intersection as u8;
 const DIFFERENCE: u8 = Op::Difference as u8;
 
-/// [`combine`] for the operation `OP` (`Op as u8`).
+/// The operation of code `op` (`Op as u8`: a const generic parameter).
 #[inline(always)]
-fn combine_op<const OP: u8>(a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
-    let op = match OP {
+const fn op_of(op: u8) -> Op {
+    match op {
         UNION => Op::Union,
         INTERSECTION => Op::Intersection,
         _ => Op::Difference,
-    };
+    }
+}
+
+/// [`combine`] for the operation `OP` (`Op as u8`).
+#[inline(always)]
+fn combine_op<const OP: u8>(a: &[Span], b: &[Span], eps: f32, out: &mut SpanList) {
+    let op = op_of(OP);
     out.clear();
     // Fast paths: nothing to merge.
     match op {
@@ -420,11 +426,7 @@ impl Emit<'_> {
 /// lists (`out` cleared).
 #[inline(always)]
 fn merge_events<const OP: u8, A: Events, B: Events>(a: A, b: B, eps: f32, out: &mut SpanList) {
-    let op = match OP {
-        UNION => Op::Union,
-        INTERSECTION => Op::Intersection,
-        _ => Op::Difference,
-    };
+    let op = op_of(OP);
     let na = a.count();
     let nb = b.count();
     let (mut ia, mut ib) = (0usize, 0usize);
@@ -619,8 +621,10 @@ mod tests {
     /// paths) against the general event loop on the same spans as slices, for every operation,
     /// on spans built to meet every rule: shared and eps-near boundaries,
     /// short spans and gaps, infinite and NaN ends, ends without surface,
-    /// flipped surfaces. A mutation of the `One` events (its end read as
-    /// its start) fails it.
+    /// flipped surfaces. Mutations that fail it: the `One` end read as its
+    /// start, the accumulator not cleared before an in-place merge, a's
+    /// surface taken at a fused intersection start or where a leaves as b
+    /// enters in a difference.
     #[test]
     fn one_span_merge_is_the_general_loop() {
         let seed = 0x0e5a_0001u64;
