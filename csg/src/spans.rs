@@ -617,8 +617,8 @@ mod tests {
         assert!(longest > 2 * INLINE_SPANS, "the lists should spill ({longest} spans at most)");
     }
 
-    /// `combine` and `combine_into` of two one-span lists (their `One`
-    /// paths) against the general event loop on the same spans as slices, for every operation,
+    /// `combine` and `combine_into` of two one-span lists (their `One` and
+    /// closed-form paths) against the general event loop on the same spans as slices, for every operation,
     /// on spans built to meet every rule: shared and eps-near boundaries,
     /// short spans and gaps, infinite and NaN ends, ends without surface,
     /// flipped surfaces. Mutations that fail it: the `One` end read as its
