@@ -445,6 +445,7 @@ impl RenderScene {
             lanes[j] = memo.lanes(m);
         }
         let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: Some((memo, k)) });
+        let mut found = [None; 8];
         for k in 0..8 {
             if left & (1 << k) == 0 {
                 continue;
@@ -457,7 +458,24 @@ impl RenderScene {
                     continue;
                 }
             }
-            out[k] = self.intersect_ctx(&ctx[k], &mut ps.scratch, normals, tile);
+            found[k] = self.nearest_ctx(&ctx[k], &mut ps.scratch, tile);
+            out[k] = None;
+        }
+        self.make_hits(rays, &found, normals, out);
+    }
+
+    /// The hits of the lanes that found one (`found[k]`: object, `t` and
+    /// surface), made together once every lane is settled: the normals'
+    /// chains of square roots and divisions, one per lane, then overlap
+    /// (made lane by lane between the lanes' evaluations, they were 9% of
+    /// the cycles of scenes/forest lit at 1920x1080, perf, against 3% of
+    /// its instructions).
+    #[inline]
+    fn make_hits(&self, rays: &[Ray], found: &[Option<(u32, f32, Surf)>; 8], normals: bool, out: &mut [Option<Hit>]) {
+        for k in 0..8 {
+            if let Some((oi, t, s)) = found[k] {
+                out[k] = Some(self.hit_at(&rays[k], oi, t, s, normals));
+            }
         }
     }
 
@@ -469,10 +487,13 @@ impl RenderScene {
         let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
         ready_memo(&mut ps.memo, &plain, tile);
         let memo = &ps.memo;
+        let mut found = [None; 8];
         for k in 0..8 {
             let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
-            out[k] = self.intersect_ctx(&ctx, &mut ps.scratch, normals, tile);
+            found[k] = self.nearest_ctx(&ctx, &mut ps.scratch, tile);
+            out[k] = None;
         }
+        self.make_hits(rays, &found, normals, out);
     }
 
     /// Any-hit for up to eight rays inside the region `tile` was prepared

@@ -277,6 +277,15 @@ impl RenderScene {
 
     /// The nearest hit of the ray of `ctx` (objects as `tile` sees them).
     pub(crate) fn intersect_ctx(&self, ctx: &RayCtx, scratch: &mut Scratch, normals: bool, tile: Option<&TileView>) -> Option<Hit> {
+        let (oi, t, s) = self.nearest_ctx(ctx, scratch, tile)?;
+        Some(self.hit_at(&ctx.ray, oi, t, s, normals))
+    }
+
+    /// [`RenderScene::intersect_ctx`] before the hit is made: the object,
+    /// `t` and surface of the nearest hit (a packet makes its lanes' hits,
+    /// normals and all, once every lane has its answer).
+    #[inline]
+    pub(crate) fn nearest_ctx(&self, ctx: &RayCtx, scratch: &mut Scratch, tile: Option<&TileView>) -> Option<(u32, f32, Surf)> {
         let ray = &ctx.ray;
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
@@ -305,7 +314,7 @@ impl RenderScene {
             best_t
         });
         let (oi, s) = best?;
-        Some(self.hit_at(ray, oi, best_t, s, normals))
+        Some((oi, best_t, s))
     }
 
     /// The hit of object `oi` at `t` on surface `s` (its normal made when

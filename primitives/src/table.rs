@@ -1106,7 +1106,9 @@ impl LeafTable {
             let nl = self.meshes[self.ext[iu] as usize].normal(sub, Vec3::ZERO);
             return world_normal(m, nl);
         }
-        let l = self.local_point(iu, o) + m.transform_vector3(d) * t;
+        // The local point only for the kinds whose normal depends on it (a
+        // box's face and a half-space's plane give theirs without it).
+        let l = || self.local_point(iu, o) + m.transform_vector3(d) * t;
         let nl = match self.kind[iu] {
             LeafKind::Cuboid => {
                 let mut n = Vec3::ZERO;
@@ -1117,9 +1119,9 @@ impl LeafTable {
                 unreachable!("made in f64 (ball_frame, quadric_normal, line64)")
             }
             LeafKind::HalfSpace => p0.truncate(),
-            LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].normal(sub, l),
-            LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].normal(sub, l),
-            LeafKind::Mesh => self.meshes[self.ext[iu] as usize].normal(sub, l),
+            LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].normal(sub, l()),
+            LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].normal(sub, l()),
+            LeafKind::Mesh => self.meshes[self.ext[iu] as usize].normal(sub, l()),
         };
         world_normal(m, nl)
     }

@@ -159,13 +159,18 @@ impl LeafTable {
     /// the chain of every hit's shading (forest: 8.9% of its lit cycles in
     /// `LeafTable::normal`, perf).
     pub(crate) fn quadric_normal(&self, iu: usize, sub: u32, ray: &Ray, t: f32) -> Vec3 {
-        let (lo, ld) = self.line64(iu, ray);
-        let l = lo + ld * t as f64;
+        // The local point (an f64 map) only where the normal depends on it:
+        // not on a cap.
+        let point = || {
+            let (lo, ld) = self.line64(iu, ray);
+            lo + ld * t as f64
+        };
         let nl = match (self.kind[iu], sub) {
-            (LeafKind::Ellipsoid, _) => l,
+            (LeafKind::Ellipsoid, _) => point(),
             (_, sub::CAP0) => DVec3::NEG_Z,
             (_, sub::CAP1) => DVec3::Z,
             (kind, _) => {
+                let l = point();
                 let (ra, rb) = if kind == LeafKind::Cone { self.cone_radii(iu) } else { (1.0, 1.0) };
                 let r = ra + (rb - ra) * l.z;
                 let xy = DVec3::new(l.x, l.y, 0.0).try_normalize().unwrap_or(DVec3::X);
