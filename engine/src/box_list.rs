@@ -4,7 +4,7 @@
 //! the arithmetic of [`Aabb::ray_range`] lane by lane, so a box's entry is the
 //! one [`entry`] gives on the scalar path (after [`canonical`]).
 
-use rothray_primitives::{Aabb, Ray};
+use rothray_primitives::{box_wide::BoxTest8, Aabb, Ray};
 
 /// Four boxes, SoA; lanes past `len` are unused.
 #[derive(Clone, Copy, Debug, Default)]
@@ -78,6 +78,36 @@ impl BoxList {
             for k in 0..lanes {
                 if hit & (1 << k) != 0 {
                     out.push((t0[k], g.id[k]));
+                }
+            }
+        }
+    }
+}
+
+impl BoxList {
+    /// [`BoxList::entries`] for the eight rays of a packet (`test`, their
+    /// ranges `tmin`, `tmax`) at once, lane `k`'s into `out[k]` (cleared
+    /// first) for the lanes `lanes`: the same entries bit for bit
+    /// ([`BoxTest8::ray_range`] is [`Aabb::ray_range`] lane by lane, then
+    /// [`canonical`]), in the same order. One 8-lane test per box instead of
+    /// a 4-box test per group and ray: a tile's list of objects was 9% of
+    /// the instructions of benches/scenes/capsules (callgrind, 480x270).
+    pub fn packet_entries(&self, test: &BoxTest8, range: (&[f32; 8], &[f32; 8]), lanes: u32, out: &mut [Vec<(f32, u32)>; 8]) {
+        for v in out.iter_mut() {
+            v.clear();
+        }
+        for (gi, g) in self.groups.iter().enumerate() {
+            for j in 0..(self.len - 4 * gi).min(4) {
+                let b = Aabb::new(
+                    glam::Vec3::new(g.min[0][j], g.min[1][j], g.min[2][j]),
+                    glam::Vec3::new(g.max[0][j], g.max[1][j], g.max[2][j]),
+                );
+                let (hit, t0) = test.ray_range(&b, range.0, range.1);
+                let mut m = hit & lanes;
+                while m != 0 {
+                    let k = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    out[k].push((canonical(t0[k]), g.id[j]));
                 }
             }
         }
@@ -183,6 +213,66 @@ mod tests {
             hits += got.len();
             n += boxes.len();
         }
+        assert!(hits * 10 > n && hits < n, "{hits} of {n} boxes hit: too few or all");
+    }
+
+    /// A packet's entries are each lane's own, bit for bit, in the same
+    /// order: packets of eight rays of one octant (from one point, or
+    /// parallel, or scattered), ranges of every kind, boxes with faces at
+    /// the rays' origins.
+    #[test]
+    fn packet_entries_are_each_rays() {
+        let seed = 0xb0c6;
+        println!("seed {seed:#x}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let pick = |rng: &mut SmallRng| -> f32 {
+            match rng.gen_range(0..6) {
+                0 => 0.0,
+                1 => 1.0,
+                2 => -1.0,
+                _ => rng.gen_range(-3.0..3.0),
+            }
+        };
+        let (mut hits, mut n, mut packets) = (0, 0, 0);
+        for _ in 0..2000 {
+            let mut list = BoxList::default();
+            let mut boxes = Vec::new();
+            for id in 0..rng.gen_range(1..14) {
+                let a = Vec3::new(pick(&mut rng), pick(&mut rng), pick(&mut rng));
+                let b = a + Vec3::new(rng.gen_range(0.0..2.0), rng.gen_range(0.0..2.0), rng.gen_range(0.0..2.0));
+                list.push(&Aabb::new(a, b), id);
+                boxes.push(Aabb::new(a, b));
+            }
+            // From one point, from points near one, or parallel, aimed near
+            // a box's centre.
+            let base = Vec3::new(pick(&mut rng), pick(&mut rng), pick(&mut rng)) * 2.0;
+            let aim = boxes[rng.gen_range(0..boxes.len())].center();
+            let kind = rng.gen_range(0..3);
+            let rays: [Ray; 8] = std::array::from_fn(|_| {
+                let jitter = |rng: &mut SmallRng, s: f32| Vec3::new(rng.gen_range(-s..s), rng.gen_range(-s..s), rng.gen_range(-s..s));
+                let o = if kind == 0 { base } else { base + jitter(&mut rng, 0.3) };
+                let d = if kind == 1 { aim - base } else { aim + jitter(&mut rng, 0.5) - o };
+                let tmin = if rng.gen_bool(0.6) { 0.0 } else { rng.gen_range(-2.0..1.0) };
+                Ray::segment(o, d, tmin, if rng.gen_bool(0.5) { f32::INFINITY } else { rng.gen_range(1.0..4.0) })
+            });
+            let Some(test) = BoxTest8::new(&rays.map(|r| r.origin), &rays.map(|r| r.dir)) else { continue };
+            packets += 1;
+            let lanes = rng.gen_range(1..256u32);
+            let mut got: [Vec<(f32, u32)>; 8] = Default::default();
+            list.packet_entries(&test, (&rays.map(|r| r.tmin), &rays.map(|r| r.tmax)), lanes, &mut got);
+            let bits = |v: &[(f32, u32)]| v.iter().map(|&(t, i)| (t.to_bits(), i)).collect::<Vec<_>>();
+            for (k, ray) in rays.iter().enumerate() {
+                let mut want = Vec::new();
+                if lanes & (1 << k) != 0 {
+                    list.entries(ray, &mut want);
+                    n += list.len();
+                }
+                assert_eq!(bits(&got[k]), bits(&want), "lane {k} of {rays:?}");
+                hits += want.len();
+            }
+        }
+        assert!(packets > 500, "{packets} packets");
+        println!("{packets} packets, {hits} of {n} boxes hit");
         assert!(hits * 10 > n && hits < n, "{hits} of {n} boxes hit: too few or all");
     }
 }

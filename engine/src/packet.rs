@@ -8,6 +8,7 @@
 use glam::Vec3;
 use rothray_csg::{MemoLanes, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{
+    box_wide::BoxTest8,
     mesh::{NearestRays8, NO_THROUGH},
     Aabb, LeafTable, Span, Surf,
 };
@@ -153,6 +154,24 @@ pub struct PacketScratch {
     /// ray's range, where `cut_done` has the lane's bit.
     cut_spans: Vec<Option<Span>>,
     cut_done: Vec<u8>,
+    /// Per lane, the tile's listed objects along its ray
+    /// ([`packet_candidates`]).
+    listed: [Vec<(f32, u32)>; 8],
+}
+
+/// The objects of `tile`'s list along each of the eight `rays` (lanes
+/// `lanes`), made for the packet at once ([`BoxList::packet_entries`]) into
+/// `out`, when the tile lists its objects (two or more: one is taken
+/// without a box test) and the rays form a packet; else `false`.
+fn packet_candidates(tile: Option<&TileView>, rays: &[Ray], lanes: u32, out: &mut [Vec<(f32, u32)>; 8]) -> bool {
+    let Some(list) = tile.and_then(|t| t.bounded).filter(|l| l.len() > 1) else { return false };
+    if rays.len() != 8 {
+        return false;
+    }
+    let Some(test) = BoxTest8::new(&std::array::from_fn(|k| rays[k].origin), &std::array::from_fn(|k| rays[k].dir)) else { return false };
+    let (tmin, tmax): ([f32; 8], [f32; 8]) = (std::array::from_fn(|k| rays[k].tmin), std::array::from_fn(|k| rays[k].tmax));
+    list.packet_entries(&test, (&tmin, &tmax), lanes, out);
+    true
 }
 
 /// The mesh leaves of `roots` that a nearest-hit evaluation queries in nearest
@@ -445,6 +464,7 @@ impl RenderScene {
             lanes[j] = memo.lanes(m);
         }
         let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: Some((memo, k)) });
+        let listed = packet_candidates(tile, rays, left, &mut ps.listed);
         let mut found = [None; 8];
         for k in 0..8 {
             if left & (1 << k) == 0 {
@@ -458,7 +478,7 @@ impl RenderScene {
                     continue;
                 }
             }
-            found[k] = self.nearest_ctx(&ctx[k], &mut ps.scratch, tile);
+            found[k] = self.nearest_ctx(&ctx[k], &mut ps.scratch, tile, listed.then_some(&mut ps.listed[k]));
             out[k] = None;
         }
         self.make_hits(rays, &found, normals, out);
@@ -486,11 +506,12 @@ impl RenderScene {
     fn lane_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
         let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
         ready_memo(&mut ps.memo, &plain, tile);
+        let listed = packet_candidates(tile, rays, 0xff, &mut ps.listed);
         let memo = &ps.memo;
         let mut found = [None; 8];
         for k in 0..8 {
             let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
-            found[k] = self.nearest_ctx(&ctx, &mut ps.scratch, tile);
+            found[k] = self.nearest_ctx(&ctx, &mut ps.scratch, tile, listed.then_some(&mut ps.listed[k]));
             out[k] = None;
         }
         self.make_hits(rays, &found, normals, out);
@@ -507,9 +528,11 @@ impl RenderScene {
         if n == 8 && !self.ray_by_ray && shares_work(tile) && rays.iter().all(plain) {
             let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
             ready_memo(&mut ps.memo, &ctx, tile);
+            let listed = packet_candidates(tile, rays, 0xff, &mut ps.listed);
             let memo = &ps.memo;
             for k in 0..8 {
-                out[k] = self.occluded_ctx(&RayCtx { memo: Some((memo, k)), ..ctx[k] }, &mut ps.scratch, tile);
+                let lane = RayCtx { memo: Some((memo, k)), ..ctx[k] };
+                out[k] = self.occluded_listed(&lane, &mut ps.scratch, tile, listed.then_some(&mut ps.listed[k]));
             }
         } else {
             for k in 0..n {

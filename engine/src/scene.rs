@@ -277,15 +277,24 @@ impl RenderScene {
 
     /// The nearest hit of the ray of `ctx` (objects as `tile` sees them).
     pub(crate) fn intersect_ctx(&self, ctx: &RayCtx, scratch: &mut Scratch, normals: bool, tile: Option<&TileView>) -> Option<Hit> {
-        let (oi, t, s) = self.nearest_ctx(ctx, scratch, tile)?;
+        let (oi, t, s) = self.nearest_ctx(ctx, scratch, tile, None)?;
         Some(self.hit_at(&ctx.ray, oi, t, s, normals))
     }
 
     /// [`RenderScene::intersect_ctx`] before the hit is made: the object,
     /// `t` and surface of the nearest hit (a packet makes its lanes' hits,
-    /// normals and all, once every lane has its answer).
+    /// normals and all, once every lane has its answer). `listed`: the
+    /// objects of the tile's list along the ray, as
+    /// [`RenderScene::listed_candidates`] gives them, when the packet made
+    /// them (see [`BoxList::packet_entries`]).
     #[inline]
-    pub(crate) fn nearest_ctx(&self, ctx: &RayCtx, scratch: &mut Scratch, tile: Option<&TileView>) -> Option<(u32, f32, Surf)> {
+    pub(crate) fn nearest_ctx(
+        &self,
+        ctx: &RayCtx,
+        scratch: &mut Scratch,
+        tile: Option<&TileView>,
+        listed: Option<&mut Vec<(f32, u32)>>,
+    ) -> Option<(u32, f32, Surf)> {
         let ray = &ctx.ray;
         let mut best_t = ray.tmax;
         let mut best: Option<(u32, Surf)> = None;
@@ -302,7 +311,7 @@ impl RenderScene {
             }
         }
         // Sorted by entry: no later box reaches the best hit.
-        self.visit_candidates(ray, tile, best_t, scratch, |oi, scratch| {
+        self.visit_candidates((ray, listed), tile, best_t, scratch, |oi, scratch| {
             if let Some(obj) = self.obj_ref(oi, tile) {
                 if let Some((t, s)) = self.object_first(obj, ctx, (ray.tmin, best_t), scratch) {
                     if t < best_t || best.is_none() {
@@ -354,6 +363,18 @@ impl RenderScene {
     /// [`RenderScene::occluded_in`] for a ray in range (no rescale), with
     /// its context (which may carry a packet's memo).
     pub(crate) fn occluded_ctx(&self, ctx: &RayCtx, scratch: &mut Scratch, tile: Option<&TileView>) -> bool {
+        self.occluded_listed(ctx, scratch, tile, None)
+    }
+
+    /// [`RenderScene::occluded_ctx`]; `listed` as for
+    /// [`RenderScene::nearest_ctx`].
+    pub(crate) fn occluded_listed(
+        &self,
+        ctx: &RayCtx,
+        scratch: &mut Scratch,
+        tile: Option<&TileView>,
+        listed: Option<&mut Vec<(f32, u32)>>,
+    ) -> bool {
         let ray = &ctx.ray;
         for &oi in &self.unbounded {
             let Some(obj) = self.obj_ref(oi, tile) else { continue };
@@ -361,23 +382,32 @@ impl RenderScene {
                 return true;
             }
         }
-        let mut cands = std::mem::take(&mut scratch.cands);
-        cands.clear();
-        match tile {
-            Some(TileView { bounded: Some(list), .. }) => Self::listed_candidates(ray, list, &mut cands),
-            _ => self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
-                if tile.is_none_or(|t| t.root(oi).is_some()) {
-                    if let Some(t0) = entry(&self.objects[oi as usize].bounds, ray) {
-                        cands.push((t0, oi));
-                    }
+        let mut own = std::mem::take(&mut scratch.cands);
+        own.clear();
+        let cands = match tile {
+            Some(TileView { bounded: Some(list), .. }) => match listed {
+                Some(l) => l,
+                None => {
+                    Self::listed_candidates(ray, list, &mut own);
+                    &mut own
                 }
-                ray.tmax
-            }),
-        }
+            },
+            _ => {
+                self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
+                    if tile.is_none_or(|t| t.root(oi).is_some()) {
+                        if let Some(t0) = entry(&self.objects[oi as usize].bounds, ray) {
+                            own.push((t0, oi));
+                        }
+                    }
+                    ray.tmax
+                });
+                &mut own
+            }
+        };
         let hit = cands
             .iter()
             .any(|&(_, oi)| self.obj_ref(oi, tile).is_some_and(|obj| self.object_first(obj, ctx, (ray.tmin, ray.tmax), scratch).is_some()));
-        scratch.cands = cands;
+        scratch.cands = own;
         hit
     }
 
@@ -391,26 +421,32 @@ impl RenderScene {
     /// objects listed every box along each ray).
     fn visit_candidates(
         &self,
-        ray: &Ray,
+        (ray, listed): (&Ray, Option<&mut Vec<(f32, u32)>>),
         tile: Option<&TileView>,
         limit: f32,
         scratch: &mut Scratch,
         mut f: impl FnMut(u32, &mut Scratch) -> f32,
     ) {
         if let Some(TileView { bounded: Some(list), .. }) = tile {
-            let mut cands = std::mem::take(&mut scratch.cands);
-            Self::listed_candidates(ray, list, &mut cands);
+            let mut own = std::mem::take(&mut scratch.cands);
+            let cands = match listed {
+                Some(l) => l,
+                None => {
+                    Self::listed_candidates(ray, list, &mut own);
+                    &mut own
+                }
+            };
             if cands.len() > 1 {
                 cands.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             }
             let mut limit = limit;
-            for &(t0, oi) in &cands {
+            for &(t0, oi) in cands.iter() {
                 if t0 > limit {
                     break;
                 }
                 limit = f(oi, scratch);
             }
-            scratch.cands = cands;
+            scratch.cands = own;
             return;
         }
         let mut queue = std::mem::take(&mut scratch.queue);

@@ -70,6 +70,26 @@ impl Lanes8<'_> {
     }
 }
 
+/// The box test of [`Lanes8::ray_range`] for eight rays outside a walk
+/// (a tile's list of objects, tested once per packet instead of once per
+/// ray).
+pub struct BoxTest8(Packet8);
+
+impl BoxTest8 {
+    /// `None` unless the rays form a packet ([`forms_packet`]).
+    #[inline]
+    pub fn new(o: &[Vec3; 8], d: &[Vec3; 8]) -> Option<BoxTest8> {
+        Packet8::new(o, d).map(BoxTest8)
+    }
+
+    /// [`Lanes8::ray_range`]: per lane what [`Aabb::ray_range`] gives, bit
+    /// for bit.
+    #[inline(always)]
+    pub fn ray_range(&self, b: &Aabb, tmin: &[f32; 8], tmax: &[f32; 8]) -> (u32, [f32; 8]) {
+        Lanes8 { p: &self.0 }.ray_range(b, tmin, tmax)
+    }
+}
+
 /// Do eight rays of directions `d` form a packet for [`BoxWide::walk8`]
 /// (one direction octant, no zero component)?
 pub fn forms_packet(d: &[Vec3; 8]) -> bool {
