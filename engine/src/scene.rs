@@ -1,7 +1,7 @@
 //! The baked render scene (plain tables, no `Entity` in the hot path) and the
 //! queries it answers on one ray: nearest hit, any hit, Roth spans, point
 //! classification. The bake is in [`crate::bake`], the packet path in
-//! [`crate::packet`], the tile level in [`crate::tile`].
+//! `packet.rs`, the tile level in [`crate::tile`].
 
 use std::cell::RefCell;
 
@@ -84,7 +84,7 @@ pub struct RenderScene {
     /// Centre of `bounds` (origin when empty): the tolerance grows with a ray's
     /// distance from it.
     pub(crate) center: Vec3,
-    /// How many times [`sync_scene`] rebuilt the tables.
+    /// How many times [`crate::sync_scene`] rebuilt the tables.
     pub bake_count: u64,
     /// Accuracy knob of the swept-sphere and generalized-cylinder solvers, relative
     /// to each shape's size (default 1e-6; see `rothray bench --tolerances`).
