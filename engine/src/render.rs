@@ -170,9 +170,24 @@ fn srgb_table() -> &'static [u8; 4096] {
 
 /// A linear colour as the 8-bit sRGB pixel of the shaded picture.
 pub fn encode_srgb(c: Vec3) -> [u8; 3] {
-    let lut = srgb_table();
-    let q = |x: f32| lut[(x.clamp(0.0, 1.0) * 4095.0 + 0.5) as usize];
+    srgb_from(srgb_table(), c)
+}
+
+/// [`encode_srgb`] through the table `lut` (looked up once per tile, not
+/// per pixel: the call, the table's `OnceLock` and the bounds checks were
+/// 5% of the cycles of benches/scenes/ground lit, perf).
+#[inline(always)]
+fn srgb_from(lut: &[u8; 4096], c: Vec3) -> [u8; 3] {
+    // In 0..=4095 (a NaN converts to 0): the mask keeps it so and drops
+    // the bounds check.
+    let q = |x: f32| lut[(x.clamp(0.0, 1.0) * 4095.0 + 0.5) as usize & 4095];
     [q(c.x), q(c.y), q(c.z)]
+}
+
+/// [`encode_pixel`] for `aov`, with what it needs looked up once.
+pub(crate) fn pixel_encoder(aov: Aov) -> impl Fn(Vec3) -> [u8; 3] {
+    let lut = srgb_table();
+    move |c| if aov == Aov::Shaded { srgb_from(lut, c) } else { encode_pixel(aov, c) }
 }
 
 /// The 8-bit pixel of a colour of `aov` other than depth, as `render` writes
@@ -352,7 +367,7 @@ fn render_impl(
     let tile_total = std::sync::Mutex::new((TileStats::default(), EvalCounts::default()));
     let _ = take_eval_counts(); // this thread's earlier queries are not the render's
     let bg = if s.aov == Aov::Shaded { s.background } else { Vec3::ZERO };
-    let encode = |c: Vec3| encode_pixel(s.aov, c);
+    let encode = pixel_encoder(s.aov);
     let bg8 = encode(bg);
     // Raw output: linear colours, background until written (as `bg8` is).
     let mut lin = if raw && !want_depth { vec![bg; w * h] } else { Vec::new() };

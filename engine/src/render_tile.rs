@@ -118,7 +118,7 @@ pub(crate) fn render_tile(f: &Frame, wk: &mut Worker, rows: &mut Rows, x0: usize
             }
         }
     }
-    let encode = |c: Vec3| crate::render::encode_pixel(s.aov, c);
+    let encode = crate::render::pixel_encoder(s.aov);
     for (k, &(r, x)) in wk.px.iter().enumerate() {
         let i = r * w + x;
         // (x / 1 is x: one sample skips the division.)
