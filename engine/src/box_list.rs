@@ -82,9 +82,7 @@ impl BoxList {
             }
         }
     }
-}
 
-impl BoxList {
     /// [`BoxList::entries`] for the eight rays of a packet (`test`, their
     /// ranges `tmin`, `tmax`) at once, lane `k`'s into `out[k]` (cleared
     /// first) for the lanes `lanes`: the same entries bit for bit
@@ -169,6 +167,17 @@ mod tests {
     use glam::Vec3;
     use rand::{rngs::SmallRng, Rng, SeedableRng};
 
+    /// A coordinate: 0, 1 or -1 (faces at rays' origins, rays along slabs)
+    /// or any in [-3, 3).
+    fn pick(rng: &mut SmallRng) -> f32 {
+        match rng.gen_range(0..6) {
+            0 => 0.0,
+            1 => 1.0,
+            2 => -1.0,
+            _ => rng.gen_range(-3.0..3.0),
+        }
+    }
+
     /// The grouped SIMD test gives every box the scalar entry, bit for bit,
     /// and the same hits, on random boxes and rays, rays parallel to slabs
     /// and starting on faces included.
@@ -177,14 +186,6 @@ mod tests {
         let seed = 0xb0c5;
         println!("seed {seed:#x}");
         let mut rng = SmallRng::seed_from_u64(seed);
-        let pick = |rng: &mut SmallRng| -> f32 {
-            match rng.gen_range(0..6) {
-                0 => 0.0,
-                1 => 1.0,
-                2 => -1.0,
-                _ => rng.gen_range(-3.0..3.0),
-            }
-        };
         let (mut hits, mut n) = (0, 0);
         for _ in 0..2000 {
             let mut list = BoxList::default();
@@ -225,14 +226,6 @@ mod tests {
         let seed = 0xb0c6;
         println!("seed {seed:#x}");
         let mut rng = SmallRng::seed_from_u64(seed);
-        let pick = |rng: &mut SmallRng| -> f32 {
-            match rng.gen_range(0..6) {
-                0 => 0.0,
-                1 => 1.0,
-                2 => -1.0,
-                _ => rng.gen_range(-3.0..3.0),
-            }
-        };
         let (mut hits, mut n, mut packets) = (0, 0, 0);
         for _ in 0..2000 {
             let mut list = BoxList::default();

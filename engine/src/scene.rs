@@ -388,13 +388,7 @@ impl RenderScene {
         let mut own = std::mem::take(&mut scratch.cands);
         own.clear();
         let cands = match tile {
-            Some(TileView { bounded: Some(list), .. }) => match listed {
-                Some(l) => l,
-                None => {
-                    Self::listed_candidates(ray, list, &mut own);
-                    &mut own
-                }
-            },
+            Some(TileView { bounded: Some(list), .. }) => Self::tile_candidates(ray, list, listed, &mut own),
             _ => {
                 self.objects_cull.traverse(ray.origin, ray.inv_dir, ray.tmin, ray.tmax, |oi, _| {
                     if tile.is_none_or(|t| t.root(oi).is_some()) {
@@ -432,13 +426,7 @@ impl RenderScene {
     ) {
         if let Some(TileView { bounded: Some(list), .. }) = tile {
             let mut own = std::mem::take(&mut scratch.cands);
-            let cands = match listed {
-                Some(l) => l,
-                None => {
-                    Self::listed_candidates(ray, list, &mut own);
-                    &mut own
-                }
-            };
+            let cands = Self::tile_candidates(ray, list, listed, &mut own);
             if cands.len() > 1 {
                 cands.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             }
@@ -461,6 +449,24 @@ impl RenderScene {
         };
         self.objects_cull.visit_nearest((ray.origin, ray.inv_dir, ray.tmin, ray.tmax), limit, &mut queue, entry, |oi, _| f(oi, scratch));
         scratch.queue = queue;
+    }
+
+    /// The objects of the tile's list along the ray: `listed` when the
+    /// packet made them, else listed now into `own`.
+    #[inline(always)]
+    fn tile_candidates<'c>(
+        ray: &Ray,
+        list: &BoxList,
+        listed: Option<&'c mut Vec<(f32, u32)>>,
+        own: &'c mut Vec<(f32, u32)>,
+    ) -> &'c mut Vec<(f32, u32)> {
+        match listed {
+            Some(l) => l,
+            None => {
+                Self::listed_candidates(ray, list, own);
+                own
+            }
+        }
     }
 
     /// The objects of the tile's list whose boxes the ray's range meets,
