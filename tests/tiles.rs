@@ -274,7 +274,7 @@ fn tiles_of_many_objects_keep_ties_between_objects() {
 /// A union of many small leaves (every kind, half-spaces, transforms with
 /// shear, exact copies and boxes sharing faces): what a tile's packets walk
 /// together ([`rothray::csg::PacketMemo::walk_unions_for`]).
-fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
+fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64, kernel_only: bool) -> Shape {
     let mut kids: Vec<Shape> = Vec::with_capacity(n + 4);
     for _ in 0..n {
         let c = rp(rng, spread);
@@ -282,6 +282,7 @@ fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
             0 => Shape::Sphere { c, r: rng.gen_range(0.03..0.3) },
             1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.4)) },
             2 => Shape::Cone { a: c, b: c + DVec3::new(0.0, rng.gen_range(0.1..0.6), 0.0), ra: rng.gen_range(0.05..0.3), rb: 0.0 },
+            _ if kernel_only => Shape::Cylinder { a: c, b: c + rp(rng, 0.3), r: rng.gen_range(0.03..0.2) },
             _ => {
                 let planes = rng.gen_bool(0.05);
                 match random_leaf(rng, planes) {
@@ -293,7 +294,26 @@ fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64) -> Shape {
         kids.push(if rng.gen_bool(0.2) { random_xf(rng, s) } else { s });
     }
     insert_twins(rng, &mut kids, 5);
+    if kernel_only {
+        insert_near_twins(rng, &mut kids, 12);
+    }
     Shape::Union(kids)
+}
+
+/// Near ties: inserts fewer than `most` spheres and boxes moved by 1e-6 to
+/// 1e-3 (the scenes' fusing tolerance is about 5e-5) from a child's.
+fn insert_near_twins(rng: &mut SmallRng, kids: &mut Vec<Shape>, most: usize) {
+    for _ in 0..rng.gen_range(0..most) {
+        let k = rng.gen_range(0..kids.len());
+        let shift = rp(rng, 1.0).normalize_or_zero() * 10f64.powf(rng.gen_range(-6.0..-3.0));
+        let twin = match &kids[k] {
+            Shape::Sphere { c, r } => Shape::Sphere { c: *c + shift, r: *r },
+            Shape::Box { min, max } => Shape::Box { min: *min + shift, max: *max + shift },
+            _ => continue,
+        };
+        let at = rng.gen_range(0..=kids.len());
+        kids.insert(at, twin);
+    }
 }
 
 /// Packets of a tile walk its wide unions of leaves together, and every
@@ -315,10 +335,13 @@ fn packets_walk_wide_unions_together() {
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..16 {
             let n = rng.gen_range(20..200);
-            let mut trees = vec![many_leaf_union(&mut rng, n, 2.0)];
+            // Unions of analytic leaves only are answered by their first
+            // entries where those stand clear (union_first.rs).
+            let kernel_only = case % 2 == 1;
+            let mut trees = vec![many_leaf_union(&mut rng, n, 2.0, kernel_only)];
             if rng.gen_bool(0.5) {
                 let n = rng.gen_range(10..60);
-                trees.push(many_leaf_union(&mut rng, n, 1.0));
+                trees.push(many_leaf_union(&mut rng, n, 1.0, kernel_only));
             }
             if rng.gen_bool(0.4) {
                 trees.push(random_tree_with(&mut rng, 2, case % 4 == 0));
@@ -378,9 +401,11 @@ fn packets_walk_wide_unions_together() {
     }
     let c = rothray::csg::take_eval_counts();
     println!(
-        "{rays} rays, {hits} hits, {shadows} blocked (any-hit); wide-union evaluations answered by packet walks {}, not answered {}; tiles' lists of wide unions {lists}",
-        c.packet_lanes, c.packet_misses
+        "{rays} rays, {hits} hits, {shadows} blocked (any-hit); wide-union evaluations answered by packet walks {}, not answered {}; \
+         lanes of those walks answered by first entries {}, walked in order {}; tiles' lists of wide unions {lists}",
+        c.packet_lanes, c.packet_misses, c.first_settled, c.first_walked
     );
+    assert!(c.first_settled > rays / 10 && c.first_walked > rays / 10, "too few lanes answered by first entries, or walked, to test");
     assert!(hits > rays / 5 && shadows > rays / 5 && c.packet_lanes > rays / 3, "too few hits or packet-walked lanes to test");
     assert!(lists > 1000, "too few tiles listed their wide unions to test: {lists}");
 }

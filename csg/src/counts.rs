@@ -14,6 +14,8 @@ thread_local! {
     static LEAF_SOLVES: Cell<u64> = const { Cell::new(0) };
     static LEAF_SERVED: Cell<u64> = const { Cell::new(0) };
     static LEAF_SCALAR: Cell<u64> = const { Cell::new(0) };
+    static FIRST_SETTLED: Cell<u64> = const { Cell::new(0) };
+    static FIRST_WALKED: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -40,6 +42,13 @@ pub struct EvalCounts {
     /// Leaf queries of packet lanes that a solve left to the scalar kernel
     /// (a local direction out of the kernels' range).
     pub leaf_scalar: u64,
+    /// Lanes of packet walks of wide unions answered by their first entries
+    /// alone (`union_first.rs`).
+    pub first_settled: u64,
+    /// Lanes of those walks that walked their children in order instead (a
+    /// near tie, a short first span, a ray starting inside a child, a
+    /// child without a packet kernel, or an unbounded child).
+    pub first_walked: u64,
 }
 
 impl EvalCounts {
@@ -53,6 +62,8 @@ impl EvalCounts {
         self.leaf_solves += o.leaf_solves;
         self.leaf_lanes += o.leaf_lanes;
         self.leaf_scalar += o.leaf_scalar;
+        self.first_settled += o.first_settled;
+        self.first_walked += o.first_walked;
     }
 }
 
@@ -91,6 +102,12 @@ pub(crate) fn leaf_lane(served: bool) {
     bump(if served { &LEAF_SERVED } else { &LEAF_SCALAR });
 }
 
+#[inline(always)]
+pub(crate) fn first_entries(settled: u32, walked: u32) {
+    FIRST_SETTLED.with(|x| x.set(x.get() + settled as u64));
+    FIRST_WALKED.with(|x| x.set(x.get() + walked as u64));
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -102,5 +119,7 @@ pub fn take_eval_counts() -> EvalCounts {
         leaf_solves: LEAF_SOLVES.with(|c| c.replace(0)),
         leaf_lanes: LEAF_SERVED.with(|c| c.replace(0)),
         leaf_scalar: LEAF_SCALAR.with(|c| c.replace(0)),
+        first_settled: FIRST_SETTLED.with(|c| c.replace(0)),
+        first_walked: FIRST_WALKED.with(|c| c.replace(0)),
     }
 }

@@ -132,6 +132,21 @@ impl PacketMemo {
     }
 }
 
+impl PacketMemo {
+    /// `f` of the packet's solve of analytic leaf `i` (which must have a
+    /// packet kernel) for every lane, from its record (made now when no lane
+    /// asked before), or `None` when the packet solves no leaves.
+    #[inline(always)]
+    pub(crate) fn with_solve<R>(&self, leaves: &LeafTable, i: u32, f: impl FnOnce(&Ranges8) -> R) -> Option<R> {
+        let mut guard = self.leaf_solves.borrow_mut();
+        let LeafRecords { lanes, rays, generation, slots, .. } = &mut *guard;
+        if *lanes == 0 {
+            return None;
+        }
+        Some(f(record(slots, i, *generation, |e| solve8(leaves, i, rays, *lanes, e))))
+    }
+}
+
 /// The packet's solve of leaf `i`, out of line so that the look-up
 /// ([`PacketMemo::leaf_lane`]) is small enough to inline into the evaluator:
 /// inlined there with the solve (and the kernels' SSE2 fallback) inside, it

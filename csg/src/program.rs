@@ -1205,5 +1205,7 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
 
 #[path = "leaf_packet.rs"]
 mod leaf_packet;
+#[path = "union_first.rs"]
+mod union_first;
 #[path = "union_packet.rs"]
 mod union_packet;

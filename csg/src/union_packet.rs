@@ -19,6 +19,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Ray,
 };
 
+use super::union_first::{FirstWalk, LaneFirst};
 use super::{cand_key, cand_of_key, counts, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
 use crate::spans::SpanList;
 
@@ -119,6 +120,20 @@ impl UnionRecords {
         let d: [_; 8] = std::array::from_fn(|k| ctx[k].ray.dir);
         let tmin: [f32; 8] = std::array::from_fn(|k| ctx[k].ray.tmin);
         let tmax: [f32; 8] = std::array::from_fn(|k| ctx[k].ray.tmax);
+        let rays = Rays8 { o: &o, d: &d, tmin: &tmin };
+        // The lanes whose first entry stands clear of every other child's
+        // are answered at once (`union_first.rs`); the others walk.
+        let mut first: [Option<LaneFirst>; 8] = [None; 8];
+        if w.unbounded.is_empty() {
+            let eps = std::array::from_fn(|k| ctx[k].eps);
+            let mut fw = FirstWalk::new((prog, nu, leaves, memo), (&o, &d), (tmin, tmax, eps), lanes);
+            let mut thi = tmax;
+            traverse(prog, nu, (&rays, lanes, &mut thi), &mut self.met, &mut fw);
+            first = std::array::from_fn(|k| if lanes & (1 << k) != 0 { fw.lane(k) } else { None });
+        }
+        let answered = (0..8).filter(|&k| first[k].is_some()).fold(0u32, |m, k| m | 1 << k);
+        counts::first_entries(answered.count_ones(), (lanes & !answered).count_ones());
+        let walked = lanes & !answered;
         self.accs.resize_with(8, SpanList::new);
         self.cands.resize_with(8, Vec::new);
         let mut walk = LaneWalks {
@@ -126,7 +141,7 @@ impl UnionRecords {
             n: nu,
             leaves,
             ctx: &ctx,
-            lanes,
+            lanes: walked,
             st: std::array::from_fn(|k| UnionLane { hi: tmax[k], valid: f32::INFINITY }),
             first: [f32::INFINITY; 8],
             tmin,
@@ -138,20 +153,15 @@ impl UnionRecords {
         for k in 0..8 {
             walk.accs[k].clear();
             walk.cands[k].clear();
-            if lanes & (1 << k) != 0 && !w.unbounded.is_empty() {
+            if walked & (1 << k) != 0 && !w.unbounded.is_empty() {
                 walk.cands[k].extend(w.unbounded.iter().map(|&pos| cand_key(pos, tmin[k])));
                 walk.first[k] = tmin[k];
             }
         }
-        let mut thi = tmax;
-        let rays = Rays8 { o: &o, d: &d, tmin: &tmin };
-        // The tile's list when it made one and the lanes' rays are its own
-        // (it lists every child whose box they can meet), else the tree.
-        let listed = prog.list_of(n).and_then(|(l, plane)| l.for_rays(plane, (&o, &d), lanes, &mut self.met));
-        match listed {
-            Some(ids) => BoxWide::visit_listed(&rays, lanes, &mut thi, ids, &mut walk),
-            None => w.packet.walk8(&rays, lanes, &mut thi, &mut walk),
-        };
+        if walked != 0 {
+            let mut thi = tmax;
+            traverse(prog, nu, (&rays, walked, &mut thi), &mut self.met, &mut walk);
+        }
         let valid = walk.st.map(|s| s.valid);
         if self.recs.len() == self.len {
             self.recs.push(MemoLeaf::default());
@@ -159,14 +169,30 @@ impl UnionRecords {
         let e = &mut self.recs[self.len];
         for k in 0..8 {
             e.spans[k].clear();
-            if lanes & (1 << k) != 0 {
+            e.valid[k] = valid[k];
+            if let Some((span, v)) = first[k] {
+                e.spans[k].extend(span);
+                e.valid[k] = v;
+            } else if walked & (1 << k) != 0 {
                 e.spans[k].extend_from_slice(self.accs[k].as_slice());
             }
         }
-        (e.leaf, e.done, e.tmin, e.tmax, e.valid) = (n, lanes, tmin, tmax, valid);
+        (e.leaf, e.done, e.tmin, e.tmax) = (n, lanes, tmin, tmax);
         self.len += 1;
         self.len - 1
     }
+}
+
+/// Walks the children of wide union `n` of `prog` whose boxes the lanes
+/// `lanes` of `rays` meet (on ranges ending at `thi`) with `v`: through the
+/// tile's list when it made one and the lanes' rays are its own (it lists
+/// every child whose box they can meet), else through the node's tree.
+fn traverse(prog: &Program, n: usize, (rays, lanes, thi): (&Rays8, u32, &mut [f32; 8]), met: &mut Vec<u32>, v: &mut impl Visit8) {
+    let listed = prog.list_of(n as u32).and_then(|(l, plane)| l.for_rays(plane, (rays.o, rays.d), lanes, met));
+    match listed {
+        Some(ids) => BoxWide::visit_listed(rays, lanes, thi, ids, v),
+        None => prog.wide_of(n).packet.walk8(rays, lanes, thi, v),
+    };
 }
 
 /// Unions of fewer leaves go ray by ray: a packet's walk lists every

@@ -1,0 +1,211 @@
+//! The first entry of a wide union of convex analytic leaves for all lanes
+//! of a packet at once, without each lane's ordered visit of its children.
+//!
+//! A lane's own walk ([`Program::leaf_union`]) visits the children in the
+//! canonical order (box entry, then position), merges each one's span into
+//! its result with the regularising union (`combine`) and stops a little past
+//! the first entry it confirms ([`stop_at_first_entry`](super::stop_at_first_entry)).
+//! When one child's span starts clearly before every other child's (by more
+//! than the merge's tolerances) and is not short, that walk ends with
+//! exactly that span cut at `v = max(a + 4 eps, next_up(a))`, whatever the
+//! order: every other span is cut away or starts past `v`, and nothing is
+//! fused at `a`. So the packet only needs, per lane, the smallest span start,
+//! the second smallest, and the first span's end and surfaces: one 8-lane
+//! box test and (where some lane's box test passes) one 8-lane solve per
+//! child, with no per-lane candidate lists, merges or memo look-ups. Lanes
+//! where the conditions do not hold (a near tie, a short first span, a ray
+//! starting inside a child) are left to the lane walks
+//! (`union_packet.rs`), which give what each lane's own walk gives.
+//!
+//! Why: on a forest of 10 000 small leaves the lanes' ordered visits (their
+//! candidate lists, merges and memo look-ups) were most of the trace's
+//! cycles while the leaves' solves were an eighth (perf, `LaneWalks::take`).
+
+use rothray_primitives::{
+    box_wide::{Lanes8, Visit8},
+    kernels8::{Ranges8, Rays8Soa},
+    Aabb, LeafTable, Span, Surf,
+};
+
+use super::{PacketMemo, Program};
+use crate::counts;
+
+/// Past the first entry `a`, the other children's boxes entered beyond
+/// `a + PRUNE * eps` cannot change a lane's answer (their spans start
+/// there or later) and are not solved.
+const PRUNE: f32 = 32.0;
+
+/// The second smallest span start must lie beyond `v + APART * eps`: then
+/// no boundary of another child is fused with the first span's (within eps)
+/// or merged across a gap (below eps), and the cut at `v` removes the rest.
+const APART: f32 = 12.0;
+
+/// A lane's answer: its span list on the union (none or one span), and
+/// where it stops being exact.
+pub(crate) type LaneFirst = (Option<Span>, f32);
+
+/// Per lane, the nearest span start among the children solved so far and
+/// what is needed to check that it is the lane walk's answer.
+pub(crate) struct FirstWalk<'a> {
+    prog: &'a Program,
+    n: usize,
+    leaves: &'a LeafTable,
+    memo: &'a PacketMemo,
+    soa: Rays8Soa,
+    /// Lanes still answered here.
+    live: u32,
+    /// A child without a packet kernel: no lane is answered here.
+    abort: bool,
+    tmin: [f32; 8],
+    tmax: [f32; 8],
+    eps: [f32; 8],
+    /// Box entries past this are not solved.
+    reach: [f32; 8],
+    /// The smallest span start (clipped to the range), its end, surfaces,
+    /// and its child's box entry.
+    a: [f32; 8],
+    b: [f32; 8],
+    s0: [Surf; 8],
+    s1: [Surf; 8],
+    boxt: [f32; 8],
+    /// The second smallest span start.
+    second: [f32; 8],
+    /// A local solve when the packet's memo solves no leaves.
+    local: Ranges8,
+}
+
+impl<'a> FirstWalk<'a> {
+    /// A walk of wide union `n` of `prog` for the lanes `lanes` of rays
+    /// `o[k] + t d[k]` on `[tmin[k], tmax[k]]` with tolerances `eps[k]`
+    /// (the rays of `memo`'s packet).
+    pub(crate) fn new(
+        (prog, n, leaves, memo): (&'a Program, usize, &'a LeafTable, &'a PacketMemo),
+        (o, d): (&[glam::Vec3; 8], &[glam::Vec3; 8]),
+        (tmin, tmax, eps): ([f32; 8], [f32; 8], [f32; 8]),
+        lanes: u32,
+    ) -> Self {
+        let inf = [f32::INFINITY; 8];
+        FirstWalk {
+            prog,
+            n,
+            leaves,
+            memo,
+            soa: Rays8Soa::new(o, d),
+            live: lanes,
+            abort: false,
+            tmin,
+            tmax,
+            eps,
+            reach: tmax,
+            a: inf,
+            b: inf,
+            s0: [Surf::NONE; 8],
+            s1: [Surf::NONE; 8],
+            boxt: inf,
+            second: inf,
+            local: Ranges8::default(),
+        }
+    }
+
+    /// Lane `k`'s answer, when the walk settles it (see the module's notes).
+    pub(crate) fn lane(&self, k: usize) -> Option<LaneFirst> {
+        if self.abort || self.live & (1 << k) == 0 {
+            return None;
+        }
+        let (a, e) = (self.a[k], self.eps[k]);
+        if a == f32::INFINITY {
+            return Some((None, f32::INFINITY));
+        }
+        let v = (a + 4.0 * e).max(a.next_up());
+        let settled = a + 4.0 * e >= a.next_up()
+            && v < self.tmax[k]
+            && self.second[k] > v + APART * e
+            && self.b[k] - a > 2.0 * e
+            && self.boxt[k] <= v;
+        if !settled {
+            return None;
+        }
+        let cut = self.b[k] > v;
+        let span = Span { t0: a, s0: self.s0[k], t1: if cut { v } else { self.b[k] }, s1: if cut { Surf::NONE } else { self.s1[k] } };
+        Some((Some(span), v))
+    }
+
+    /// Takes the solve `r` of child leaf `leaf` for the lanes `m`, whose
+    /// boxes' entries are `tbox`.
+    #[inline(always)]
+    fn take(&mut self, leaf: u32, m: u32, r: &Ranges8, tbox: &[f32; 8]) {
+        let mut m = m;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            counts::wide_child();
+            if r.hit & (1 << k) == 0 {
+                continue;
+            }
+            // Clipped as `push_clipped` clips a leaf's span.
+            let (t0, t1, lo, hi) = (r.t0[k], r.t1[k], self.tmin[k], self.tmax[k]);
+            let real0 = t0 >= lo && t0.is_finite();
+            let real1 = t1 <= hi && t1.is_finite();
+            let c0 = if real0 { t0 } else { t0.max(lo) };
+            let c1 = if real1 { t1 } else { t1.min(hi) };
+            if !(c1 > c0) {
+                continue;
+            }
+            if !real0 {
+                // Inside at the range's start.
+                self.live &= !(1 << k);
+                continue;
+            }
+            if c0 < self.a[k] {
+                self.second[k] = self.a[k];
+                self.a[k] = c0;
+                self.b[k] = c1;
+                self.s0[k] = Surf::new(leaf, r.s0[k]);
+                self.s1[k] = if real1 { Surf::new(leaf, r.s1[k]) } else { Surf::NONE };
+                self.boxt[k] = tbox[k];
+                self.reach[k] = self.reach[k].min(c0 + PRUNE * self.eps[k]);
+            } else {
+                self.second[k] = self.second[k].min(c0);
+            }
+        }
+    }
+}
+
+impl Visit8 for FirstWalk<'_> {
+    #[inline(always)]
+    fn visit(&mut self, pos: u32, lanes: u32, rays: &Lanes8) {
+        let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
+        self.visit_box(pos, &self.prog.bounds[c as usize], lanes, rays)
+    }
+
+    #[inline(always)]
+    fn visit_box(&mut self, pos: u32, b: &Aabb, lanes: u32, rays: &Lanes8) {
+        let (hit, tbox) = rays.ray_range(b, &self.tmin, &self.reach);
+        let m = hit & lanes & self.live;
+        if m == 0 || self.abort {
+            return;
+        }
+        let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
+        let leaf = self.prog.first[c as usize];
+        if !self.leaves.has_kernel8(leaf) {
+            self.abort = true;
+            return;
+        }
+        let (memo, leaves) = (self.memo, self.leaves);
+        let solved = memo.with_solve(leaves, leaf, |r| self.take(leaf, m, r, &tbox));
+        if solved.is_none() {
+            counts::leaf_solve();
+            let mut r = std::mem::take(&mut self.local);
+            leaves.ranges8(leaf, &self.soa, self.live, &mut r);
+            self.take(leaf, m, &r, &tbox);
+            self.local = r;
+        }
+    }
+
+    #[inline(always)]
+    fn settle(&mut self, _lower: f32, thi: &mut [f32; 8]) {
+        for k in 0..8 {
+            thi[k] = thi[k].min(self.reach[k]);
+        }
+    }
+}
