@@ -19,7 +19,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Ray,
 };
 
-use super::union_first::{FirstWalk, LaneFirst};
+use super::union_first::{FirstWalk, LaneFirst, Pending};
 use super::{cand_key, cand_of_key, counts, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
 use crate::spans::SpanList;
 
@@ -39,6 +39,8 @@ pub(crate) struct UnionRecords {
     tmp: SpanList,
     /// The tile list's children a packet can meet (`TileList::for_rays`).
     met: Vec<u32>,
+    /// The first-entry walk's children waiting for their solves.
+    pending: Vec<Pending>,
 }
 
 impl UnionRecords {
@@ -126,10 +128,10 @@ impl UnionRecords {
         let mut first: [Option<LaneFirst>; 8] = [None; 8];
         if w.unbounded.is_empty() {
             let eps = std::array::from_fn(|k| ctx[k].eps);
-            let mut fw = FirstWalk::new((prog, nu, leaves, memo), (&o, &d), (tmin, tmax, eps), lanes);
+            let mut fw = FirstWalk::new((prog, nu, leaves, memo), (&o, &d), (tmin, tmax, eps), lanes, &mut self.pending);
             let mut thi = tmax;
             traverse(prog, nu, (&rays, lanes, &mut thi), &mut self.met, &mut fw);
-            first = std::array::from_fn(|k| if lanes & (1 << k) != 0 { fw.lane(k) } else { None });
+            first = fw.finish();
         }
         let answered = (0..8).filter(|&k| first[k].is_some()).fold(0u32, |m, k| m | 1 << k);
         counts::first_entries(answered.count_ones(), (lanes & !answered).count_ones());
