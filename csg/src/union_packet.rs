@@ -115,32 +115,61 @@ impl UnionRecords {
     /// the evaluator calls it.)
     fn walk(&mut self, memo: &PacketMemo, prog: &Program, leaves: &LeafTable, n: u32) -> usize {
         let nu = n as usize;
-        let w = prog.wide_of(nu);
         let lanes = self.lanes;
-        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: Some((memo, k)) });
-        let o: [_; 8] = std::array::from_fn(|k| ctx[k].ray.origin);
-        let d: [_; 8] = std::array::from_fn(|k| ctx[k].ray.dir);
-        let tmin: [f32; 8] = std::array::from_fn(|k| ctx[k].ray.tmin);
-        let tmax: [f32; 8] = std::array::from_fn(|k| ctx[k].ray.tmax);
+        let o: [_; 8] = std::array::from_fn(|k| self.rays[k].0.origin);
+        let d: [_; 8] = std::array::from_fn(|k| self.rays[k].0.dir);
+        let tmin: [f32; 8] = std::array::from_fn(|k| self.rays[k].0.tmin);
+        let tmax: [f32; 8] = std::array::from_fn(|k| self.rays[k].0.tmax);
         let rays = Rays8 { o: &o, d: &d, tmin: &tmin };
         // The lanes whose first entry stands clear of every other child's
         // are answered at once (`union_first.rs`); the others walk.
         let mut first: [Option<LaneFirst>; 8] = [None; 8];
-        if w.unbounded.is_empty() {
-            let eps = std::array::from_fn(|k| ctx[k].eps);
+        if prog.wide_of(nu).unbounded.is_empty() {
+            let eps = std::array::from_fn(|k| self.rays[k].1);
             let mut fw = FirstWalk::new((prog, nu, leaves, memo), (&o, &d), (tmin, tmax, eps), lanes, &mut self.pending);
             let mut thi = tmax;
             traverse(prog, nu, (&rays, lanes, &mut thi), &mut self.met, &mut fw);
             first = fw.finish();
         }
-        let answered = (0..8).filter(|&k| first[k].is_some()).fold(0u32, |m, k| m | 1 << k);
-        counts::first_entries(answered.count_ones(), (lanes & !answered).count_ones());
+        let mut answered = 0u32;
+        for (k, f) in first.iter().enumerate() {
+            answered |= (f.is_some() as u32) << k;
+        }
         let walked = lanes & !answered;
+        counts::first_entries(answered.count_ones(), walked.count_ones());
+        let valid = if walked != 0 { self.walk_in_order(memo, (prog, nu, leaves), &rays, walked) } else { [f32::INFINITY; 8] };
+        if self.recs.len() == self.len {
+            self.recs.push(MemoLeaf::default());
+        }
+        let e = &mut self.recs[self.len];
+        for k in 0..8 {
+            e.spans[k].clear();
+            e.valid[k] = valid[k];
+            if let Some((span, v)) = first[k] {
+                e.spans[k].extend(span);
+                e.valid[k] = v;
+            } else if walked & (1 << k) != 0 {
+                e.spans[k].extend_from_slice(self.accs[k].as_slice());
+            }
+        }
+        (e.leaf, e.done, e.tmin, e.tmax) = (n, lanes, tmin, tmax);
+        self.len += 1;
+        self.len - 1
+    }
+
+    /// Walks wide leaf union `n` of `prog` for the lanes `walked` of the
+    /// packet, each visiting the children along its ray in the canonical
+    /// order, into `accs`; returns where each lane's result stops being exact.
+    fn walk_in_order(&mut self, memo: &PacketMemo, (prog, n, leaves): (&Program, usize, &LeafTable), rays: &Rays8, walked: u32) -> [f32; 8] {
+        let w = prog.wide_of(n);
+        let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: Some((memo, k)) });
+        let tmin = *rays.tmin;
+        let tmax: [f32; 8] = std::array::from_fn(|k| ctx[k].ray.tmax);
         self.accs.resize_with(8, SpanList::new);
         self.cands.resize_with(8, Vec::new);
         let mut walk = LaneWalks {
             prog,
-            n: nu,
+            n,
             leaves,
             ctx: &ctx,
             lanes: walked,
@@ -160,28 +189,9 @@ impl UnionRecords {
                 walk.first[k] = tmin[k];
             }
         }
-        if walked != 0 {
-            let mut thi = tmax;
-            traverse(prog, nu, (&rays, walked, &mut thi), &mut self.met, &mut walk);
-        }
-        let valid = walk.st.map(|s| s.valid);
-        if self.recs.len() == self.len {
-            self.recs.push(MemoLeaf::default());
-        }
-        let e = &mut self.recs[self.len];
-        for k in 0..8 {
-            e.spans[k].clear();
-            e.valid[k] = valid[k];
-            if let Some((span, v)) = first[k] {
-                e.spans[k].extend(span);
-                e.valid[k] = v;
-            } else if walked & (1 << k) != 0 {
-                e.spans[k].extend_from_slice(self.accs[k].as_slice());
-            }
-        }
-        (e.leaf, e.done, e.tmin, e.tmax) = (n, lanes, tmin, tmax);
-        self.len += 1;
-        self.len - 1
+        let mut thi = tmax;
+        traverse(prog, n, (rays, walked, &mut thi), &mut self.met, &mut walk);
+        walk.st.map(|s| s.valid)
     }
 }
 
