@@ -160,7 +160,13 @@ impl UnionRecords {
     /// Walks wide leaf union `n` of `prog` for the lanes `walked` of the
     /// packet, each visiting the children along its ray in the canonical
     /// order, into `accs`; returns where each lane's result stops being exact.
-    fn walk_in_order(&mut self, memo: &PacketMemo, (prog, n, leaves): (&Program, usize, &LeafTable), rays: &Rays8, walked: u32) -> [f32; 8] {
+    fn walk_in_order(
+        &mut self,
+        memo: &PacketMemo,
+        (prog, n, leaves): (&Program, usize, &LeafTable),
+        rays: &Rays8,
+        walked: u32,
+    ) -> [f32; 8] {
         let w = prog.wide_of(n);
         let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: Some((memo, k)) });
         let tmin = *rays.tmin;

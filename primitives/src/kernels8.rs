@@ -20,7 +20,7 @@ use glam::{DMat3, DVec3, Vec3};
 use crate::kernels::sub;
 use crate::simd8::D8;
 #[cfg(target_arch = "x86_64")]
-use crate::simd8::{avx_d, sse_d};
+use crate::simd8::{avx512_d, avx_d, sse_d};
 use crate::table::{LeafKind, LeafTable};
 
 /// Per lane, a leaf's unclipped range along the lane's ray (as the scalar
@@ -342,6 +342,10 @@ impl LeafTable {
     pub fn ranges8(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         #[cfg(target_arch = "x86_64")]
         {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU has AVX-512F.
+                return unsafe { self.ranges8_avx512(i, rays, lanes, out) };
+            }
             if std::arch::is_x86_feature_detected!("avx") {
                 // SAFETY: the CPU has AVX.
                 return unsafe { self.ranges8_avx(i, rays, lanes, out) };
@@ -361,6 +365,27 @@ impl LeafTable {
     #[cfg(target_arch = "x86_64")]
     pub fn ranges8_sse(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         self.ranges8_in::<sse_d::SseD>(i, rays, lanes, out)
+    }
+
+    /// [`LeafTable::ranges8`] with two AVX registers per value, for tests
+    /// (on a CPU with AVX): the same answers.
+    #[doc(hidden)]
+    #[cfg(target_arch = "x86_64")]
+    pub fn ranges8_avx2(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) -> bool {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return false;
+        }
+        // SAFETY: the CPU has AVX.
+        unsafe { self.ranges8_avx(i, rays, lanes, out) };
+        true
+    }
+
+    /// [`LeafTable::ranges8`] with one AVX-512 register per value (where
+    /// the CPU has AVX-512F: half the instructions of two AVX registers).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn ranges8_avx512(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        self.ranges8_in::<avx512_d::Avx512D>(i, rays, lanes, out)
     }
 
     #[cfg(target_arch = "x86_64")]

@@ -8,6 +8,32 @@ fn v(rng: &mut SmallRng, r: f32) -> Vec3 {
     Vec3::new(rng.gen_range(-r..r), rng.gen_range(-r..r), rng.gen_range(-r..r))
 }
 
+/// The SSE2 and two-register AVX builds of the kernels give exactly what
+/// `ranges8` gave (the widest build the CPU has: AVX-512F on most x86_64
+/// servers), for leaf `i` and the lanes `lanes` of `rays`.
+fn builds_agree(t: &LeafTable, i: u32, (rays, lanes): (&Rays8Soa, u32), r: &Ranges8, what: &str) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let mut builds = vec![("SSE2", Ranges8::default())];
+        t.ranges8_sse(i, rays, lanes, &mut builds[0].1);
+        let mut avx = Ranges8::default();
+        if t.ranges8_avx2(i, rays, lanes, &mut avx) {
+            builds.push(("AVX", avx));
+        }
+        for (name, s) in &builds {
+            assert_eq!((r.done, r.hit), (s.done, s.hit), "leaf {i} {what}: {name} masks differ");
+            for k in 0..8 {
+                if r.hit & (1 << k) != 0 {
+                    let a = (r.t0[k].to_bits(), r.s0[k], r.t1[k].to_bits(), r.s1[k]);
+                    assert_eq!(a, (s.t0[k].to_bits(), s.s0[k], s.t1[k].to_bits(), s.s1[k]), "leaf {i} lane {k} {what}: {name} differs");
+                }
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (t, i, rays, lanes, r, what);
+}
+
 /// A leaf table of every kind with a packet kernel, under random affine
 /// maps with shear (and some axis-aligned ones, whose rays meet faces
 /// edge-on), far from and near the origin.
@@ -76,18 +102,7 @@ fn packet_kernels_match_the_scalar_kernels_bit_for_bit() {
         let rays = Rays8Soa::new(&o, &d);
         let mut r = Ranges8::default();
         t.ranges8(i, &rays, lanes, &mut r);
-        #[cfg(target_arch = "x86_64")]
-        {
-            let mut s = Ranges8::default();
-            t.ranges8_sse(i, &rays, lanes, &mut s);
-            assert_eq!((r.done, r.hit), (s.done, s.hit), "leaf {i} round {round}: AVX and SSE2 masks differ");
-            for k in 0..8 {
-                if r.hit & (1 << k) != 0 {
-                    let a = (r.t0[k].to_bits(), r.s0[k], r.t1[k].to_bits(), r.s1[k]);
-                    assert_eq!(a, (s.t0[k].to_bits(), s.s0[k], s.t1[k].to_bits(), s.s1[k]), "leaf {i} lane {k}");
-                }
-            }
-        }
+        builds_agree(&t, i, (&rays, lanes), &r, &format!("round {round}"));
         assert_eq!(r.done & !lanes, 0);
         for k in 0..8 {
             if lanes & (1 << k) == 0 {
@@ -156,12 +171,7 @@ fn packet_kernels_match_the_scalar_kernels_on_edge_cases() {
         let rays = Rays8Soa::new(&o, &d);
         let mut r = Ranges8::default();
         t.ranges8(i, &rays, 0xff, &mut r);
-        #[cfg(target_arch = "x86_64")]
-        {
-            let mut s = Ranges8::default();
-            t.ranges8_sse(i, &rays, 0xff, &mut s);
-            assert_eq!((r.done, r.hit), (s.done, s.hit), "leaf {i} round {round}");
-        }
+        builds_agree(&t, i, (&rays, 0xff), &r, &format!("round {round}"));
         for k in 0..8 {
             let ray = Ray::new(o[k], d[k]);
             // Every packet kernel is f64: every lane is done.
@@ -213,12 +223,7 @@ fn packet_cones_match_the_scalar_cone_along_generators() {
         let rays = Rays8Soa::new(&o, &d);
         let mut r = Ranges8::default();
         t.ranges8(i, &rays, 0xff, &mut r);
-        #[cfg(target_arch = "x86_64")]
-        {
-            let mut s = Ranges8::default();
-            t.ranges8_sse(i, &rays, 0xff, &mut s);
-            assert_eq!((r.done, r.hit), (s.done, s.hit), "leaf {i} round {round}");
-        }
+        builds_agree(&t, i, (&rays, 0xff), &r, &format!("round {round}"));
         for k in 0..8 {
             let ray = Ray::new(o[k], d[k]);
             assert!(r.done & (1 << k) != 0);

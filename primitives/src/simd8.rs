@@ -267,3 +267,122 @@ pub(crate) mod avx_d {
         }
     }
 }
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod avx512_d {
+    use std::arch::x86_64::*;
+
+    /// One AVX-512 register of eight f64; only used inside functions compiled
+    /// with AVX-512F. A mask is a vector (all ones or all zeros per lane), as
+    /// the trait has it: a compare's mask register is widened to one, and a
+    /// select tests it back (one instruction each).
+    #[derive(Clone, Copy)]
+    pub(crate) struct Avx512D(pub(crate) __m512d);
+
+    #[inline(always)]
+    fn bits(a: __m512d) -> __m512i {
+        unsafe { _mm512_castpd_si512(a) }
+    }
+
+    #[inline(always)]
+    fn pd(a: __m512i) -> Avx512D {
+        unsafe { Avx512D(_mm512_castsi512_pd(a)) }
+    }
+
+    #[inline(always)]
+    fn mask(k: __mmask8) -> Avx512D {
+        unsafe { pd(_mm512_maskz_set1_epi64(k, -1)) }
+    }
+
+    // SAFETY (every method): only called from `LeafTable::ranges8_avx512`
+    // (kernels8.rs), compiled with AVX-512F and reached only when the CPU has
+    // it; inlined there.
+    impl super::D8 for Avx512D {
+        #[inline(always)]
+        fn splat(x: f64) -> Self {
+            unsafe { Avx512D(_mm512_set1_pd(x)) }
+        }
+        #[inline(always)]
+        fn widen(a: &[f32; 8]) -> Self {
+            unsafe { Avx512D(_mm512_cvtps_pd(_mm256_loadu_ps(a.as_ptr()))) }
+        }
+        #[inline(always)]
+        fn narrow(self) -> [f32; 8] {
+            let mut a = [0.0f32; 8];
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), _mm512_cvtpd_ps(self.0)) };
+            a
+        }
+        #[inline(always)]
+        fn store_u32(self) -> [u32; 8] {
+            let mut a = [0u32; 8];
+            unsafe { _mm256_storeu_si256(a.as_mut_ptr() as *mut __m256i, _mm512_cvttpd_epi32(self.0)) };
+            a
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            unsafe { Avx512D(_mm512_add_pd(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            unsafe { Avx512D(_mm512_sub_pd(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            unsafe { Avx512D(_mm512_mul_pd(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            unsafe { Avx512D(_mm512_div_pd(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            unsafe { Avx512D(_mm512_sqrt_pd(self.0)) }
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            unsafe { pd(_mm512_xor_si512(bits(self.0), bits(_mm512_set1_pd(-0.0)))) }
+        }
+        #[inline(always)]
+        fn copysign(self, s: Self) -> Self {
+            unsafe {
+                let m = bits(_mm512_set1_pd(-0.0));
+                pd(_mm512_or_si512(_mm512_and_si512(bits(s.0), m), _mm512_andnot_si512(m, bits(self.0))))
+            }
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> Self {
+            unsafe { mask(_mm512_cmp_pd_mask::<_CMP_LE_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            unsafe { mask(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            unsafe { mask(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> Self {
+            unsafe { mask(_mm512_cmp_pd_mask::<_CMP_EQ_OQ>(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            unsafe { pd(_mm512_and_si512(bits(self.0), bits(o.0))) }
+        }
+        #[inline(always)]
+        fn andnot(self, o: Self) -> Self {
+            unsafe { pd(_mm512_andnot_si512(bits(self.0), bits(o.0))) }
+        }
+        #[inline(always)]
+        fn select(m: Self, a: Self, b: Self) -> Self {
+            unsafe {
+                let k = _mm512_test_epi64_mask(bits(m.0), bits(m.0));
+                Avx512D(_mm512_mask_blend_pd(k, b.0, a.0))
+            }
+        }
+        #[inline(always)]
+        fn bitmask(self) -> u32 {
+            unsafe { _mm512_test_epi64_mask(bits(self.0), bits(self.0)) as u32 }
+        }
+    }
+}
