@@ -12,6 +12,11 @@
 //! Why: in a union of thousands of small leaves (a forest), camera rays
 //! spend most of their time walking the node's tree, and the neighbouring
 //! rays of a packet walk mostly the same nodes.
+//!
+//! A union of analytic leaves is first walked for the lanes' first entries
+//! alone (`union_first.rs`): the lanes whose first entry stands clear of
+//! every other child's are recorded from it, and only the others visit
+//! their children in the canonical order here.
 
 use glam::Vec4;
 use rothray_primitives::{
