@@ -32,8 +32,11 @@ use crate::counts;
 
 /// Past the first entry `a`, the other children's boxes entered beyond
 /// `a + PRUNE * eps` cannot change a lane's answer (their spans start
-/// there or later) and are not solved.
-const PRUNE: f32 = 32.0;
+/// there or later, up to the rounding of the box test and of the solve: a
+/// few ulps, and a lane is settled only where 4 eps is at least an ulp, so
+/// that rounding stays well inside the margin down to `v + APART * eps`)
+/// and are not solved.
+const PRUNE: f32 = 64.0;
 
 /// The second smallest span start must lie beyond `v + APART * eps`: then
 /// no boundary of another child is fused with the first span's (within eps)
