@@ -300,6 +300,12 @@ fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64, kernel_only: bool)
     Shape::Union(kids)
 }
 
+/// `s` moved by `off` (a `transformed` node).
+fn translated(s: Shape, off: DVec3) -> Shape {
+    let json = format!("\"translate\":[{},{},{}]", off.x, off.y, off.z);
+    Shape::Xf { m: glam::DAffine3::from_translation(off), json, s: Box::new(s) }
+}
+
 /// Near ties: inserts fewer than `most` spheres and boxes moved by 1e-6 to
 /// 1e-3 (the scenes' fusing tolerance is about 5e-5) from a child's.
 fn insert_near_twins(rng: &mut SmallRng, kids: &mut Vec<Shape>, most: usize) {
@@ -326,6 +332,22 @@ fn insert_near_twins(rng: &mut SmallRng, kids: &mut Vec<Shape>, most: usize) {
 /// anything.
 #[test]
 fn packets_walk_wide_unions_together() {
+    walk_wide_unions(false);
+}
+
+/// [`packets_walk_wide_unions_together`] with a quarter of the scenes of
+/// analytic unions moved 3e3 to 5e3 from the origin. Known to fail: there
+/// the whole program's single-ray query misses a short span (1e-3 long) that
+/// the tile's program finds and point classification confirms (seed 0x3a13
+/// case 15 tile 13 ray 0: leaf 118 at t = 1.61865; the model is inside at
+/// t = 1.6187 and 1.6188). Numerics far from the origin, not the packets.
+#[test]
+#[ignore = "known: single rays miss a short span 3e3 from the origin (see the note)"]
+fn packets_walk_wide_unions_together_far_from_origin() {
+    walk_wide_unions(true);
+}
+
+fn walk_wide_unions(far: bool) {
     let (mut rays, mut hits, mut shadows) = (0u64, 0u64, 0u64);
     // Tiles whose wide unions were listed (see rothray::csg::tile_list).
     let mut lists = 0u64;
@@ -349,24 +371,37 @@ fn packets_walk_wide_unions_together() {
             if rng.gen_bool(0.3) {
                 trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.5 });
             }
+            // With `far`, some scenes of analytic unions far from the origin
+            // (no meshes there: case % 4 == 3): the first-entry walk's
+            // margins in eps against the rounding of large coordinates.
+            let off = if far && kernel_only && case % 4 == 3 { DVec3::new(3072.0, -2048.0, 5120.0) } else { DVec3::ZERO };
+            if off != DVec3::ZERO {
+                trees = trees.into_iter().map(|t| translated(t, off)).collect();
+            }
             let scene = bake(&trees);
             remove_mesh_files(&trees);
             let mut ps = PacketScratch::default();
             let mut ts = TileScratch::default();
             for t in 0..16 {
                 let (o, d) = random_ray(&mut rng);
-                let d = d.normalize();
+                // The origin an f32 point: a tile's region must hold its
+                // rays, and 3e3 out an f64 apex is 1e-4 from its f32 rays.
+                let (o, d) = ((o + off).as_vec3().as_dvec3(), d.normalize());
                 let half = if t % 2 == 0 { (0.15, 0.1) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
                 let shadow = t % 4 == 3;
                 let (packet, region): (Vec<Ray>, Frustum) = if shadow {
                     // Parallel rays from a box of origins.
                     let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
-                    let org = rothray::primitives::Aabb::new((o - h).as_vec3(), (o + h).as_vec3());
-                    let rays = (0..8)
+                    let rays: Vec<Ray> = (0..8)
                         .map(|_| {
                             to_ray(o + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h, d)
                         })
                         .collect();
+                    // The box of the rays' own (f32) origins, as the renderer makes it.
+                    let mut org = rothray::primitives::Aabb::EMPTY;
+                    for r in &rays {
+                        org.grow(r.origin);
+                    }
                     (rays, Frustum::sweep(&org, d.as_vec3()))
                 } else {
                     let (e, region) = pyramid_around(o, d, half);
