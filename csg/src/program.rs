@@ -931,10 +931,16 @@ impl Program {
         sort_cands(&mut cand[base..]);
     }
 
+    /// The node of child `pos` of node `n`.
+    #[inline(always)]
+    pub(crate) fn child_at(&self, n: usize, pos: u32) -> u32 {
+        self.children[(self.first[n] + pos) as usize]
+    }
+
     /// Where `ray` enters the box of child `pos` of node `n` within its range.
     #[inline(always)]
     pub(crate) fn child_entry(&self, n: usize, pos: u32, ray: &Ray) -> Option<f32> {
-        let c = self.children[(self.first[n] + pos) as usize];
+        let c = self.child_at(n, pos);
         self.bounds[c as usize].ray_range(ray.origin, ray.inv_dir, ray.tmin, ray.tmax).map(|r| r.0)
     }
 
@@ -947,7 +953,7 @@ impl Program {
         let Ask { leaves, ctx, mode } = ask;
         let (leaf, tmp, acc) = lists;
         counts::wide_child();
-        let c = self.children[(self.first[n] + pos) as usize];
+        let c = self.child_at(n, pos);
         leaf.clear();
         let v = leaf_spans(leaves, ctx, self.first[c as usize], (tmin, st.hi), ctx.nearest(mode), leaf);
         if v < st.valid {
@@ -979,7 +985,7 @@ impl Program {
         let lo = scratch.cand.len();
         let cand = &mut scratch.cand;
         w.bvh.traverse(ray.origin, ray.inv_dir, tmin, tmax, |pos, _| {
-            let c = self.children[(self.first[n] + pos) as usize];
+            let c = self.child_at(n, pos);
             if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.origin, ray.inv_dir, tmin, tmax) {
                 cand.push((pos, t0));
                 counts::wide_child();

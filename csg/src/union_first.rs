@@ -200,7 +200,7 @@ impl<'a> FirstWalk<'a> {
 impl Visit8 for FirstWalk<'_> {
     #[inline(always)]
     fn visit(&mut self, pos: u32, lanes: u32, rays: &Lanes8) {
-        let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
+        let c = self.prog.child_at(self.n, pos);
         self.visit_box(pos, &self.prog.bounds[c as usize], lanes, rays)
     }
 
@@ -243,7 +243,7 @@ impl FirstWalk<'_> {
             if m == 0 || self.abort {
                 continue;
             }
-            let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
+            let c = self.prog.child_at(self.n, pos);
             let leaf = self.prog.first[c as usize];
             if !self.leaves.has_kernel8(leaf) {
                 self.abort = true;

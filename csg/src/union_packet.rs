@@ -266,7 +266,7 @@ impl Visit8 for LaneWalks<'_, '_, '_> {
     // is compiled with the walk's AVX.
     #[inline(always)]
     fn visit(&mut self, pos: u32, lanes: u32, rays: &Lanes8) {
-        let c = self.prog.children[(self.prog.first[self.n] + pos) as usize];
+        let c = self.prog.child_at(self.n, pos);
         self.visit_box(pos, &self.prog.bounds[c as usize], lanes, rays)
     }
 
