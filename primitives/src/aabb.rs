@@ -1,6 +1,6 @@
 //! Axis-aligned boxes and the ray/box slab test.
 
-use glam::{Affine3A, Vec3, Vec3A};
+use glam::{Affine3A, DAffine3, DVec3, Vec3, Vec3A};
 
 /// An axis-aligned bounding box. `Aabb::EMPTY` has `min > max`; an unbounded solid
 /// (a half-space) has infinite components.
@@ -65,6 +65,48 @@ impl Aabb {
             (self.max - self.min).length()
         }
     }
+    /// The f32 box holding the f64 box `[lo, hi]` grown by [`span_margin`]
+    /// (infinite sides stay infinite). A leaf's bounds rounded to the
+    /// nearest f32 lost up to half an ulp: 2.4e-4 at 5e3 from the origin,
+    /// and a ray crossing a box's corner there for 1e-3 missed it in the
+    /// whole program's box tests while a tile's kernels found the span
+    /// (tests/tiles.rs, `packets_walk_wide_unions_together_far_from_origin`).
+    pub fn enclosing(lo: DVec3, hi: DVec3) -> Aabb {
+        if !(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z) {
+            return Aabb::EMPTY;
+        }
+        let finite = lo.is_finite() && hi.is_finite();
+        let size = if finite { (hi - lo).length() } else { 0.0 };
+        let reach = lo.abs().max(hi.abs()).max_element();
+        let margin = span_margin(size, if reach.is_finite() { reach } else { 0.0 });
+        let mut out = Aabb::EMPTY;
+        for i in 0..3 {
+            let (l, h) = ((lo[i] - margin) as f32, (hi[i] + margin) as f32);
+            out.min[i] = if l.is_finite() { l.next_down() } else { l };
+            out.max[i] = if h.is_finite() { h.next_up() } else { h };
+        }
+        out
+    }
+
+    /// [`Aabb::transformed`] in f64, enclosed by [`Aabb::enclosing`]: the
+    /// f32 sums of the transform rounded the corners to the nearest f32.
+    pub fn transformed_f64(&self, m: &DAffine3) -> Aabb {
+        if self.is_empty() {
+            return Aabb::EMPTY;
+        }
+        if !self.is_finite() {
+            return Aabb::INFINITE;
+        }
+        let (mut lo, mut hi) = (m.translation, m.translation);
+        for (j, c) in [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis].iter().enumerate() {
+            let a = *c * self.min[j] as f64;
+            let b = *c * self.max[j] as f64;
+            lo += a.min(b);
+            hi += a.max(b);
+        }
+        Aabb::enclosing(lo, hi)
+    }
+
     /// The box of the image of this box under `m` (all eight corners). Infinite boxes
     /// stay infinite.
     pub fn transformed(&self, m: &Affine3A) -> Aabb {
@@ -117,6 +159,15 @@ impl Aabb {
             None
         }
     }
+}
+
+/// How far leaf bounds reach past a solid of diagonal `size` whose farthest
+/// coordinate from the origin is `reach`: the f32 rounding of the leaves'
+/// own spans and of the box tests is a few ulps of the coordinates
+/// involved; 1e-5 of the size plus 1e-6 of the reach (8 ulps) covers it
+/// with room to spare.
+pub fn span_margin(size: f64, reach: f64) -> f64 {
+    1e-5 * size + 1e-6 * reach + 1e-30
 }
 
 /// `a > b ? a : b`, as `maxps` (and so glam's SSE `Vec4::max`) computes

@@ -142,16 +142,14 @@ fn enumerate(planes: &[Plane], clip: &Aabb) -> Aabb {
         // No vertex: the polytope has no interior.
         return Aabb::EMPTY;
     }
-    // Margin: f32 leaf kernels round their crossings by a few ulps of the
-    // coordinates involved; 1e-5 of the size plus 1e-6 of the distance from
-    // the origin covers that with room to spare.
+    // Margin: crate::aabb::span_margin.
     // Open sides (on the far box) do not count towards the size and reach.
     let open_lo = lo.cmple(DVec3::splat(-0.5 * far));
     let open_hi = hi.cmpge(DVec3::splat(0.5 * far));
     let (flo, fhi) = (DVec3::select(open_lo, DVec3::ZERO, lo), DVec3::select(open_hi, DVec3::ZERO, hi));
     let size = DVec3::select(open_lo | open_hi, DVec3::ZERO, hi - lo).length();
     let reach = flo.abs().max(fhi.abs()).max_element();
-    let margin = 1e-5 * size + 1e-6 * reach + 1e-30;
+    let margin = crate::aabb::span_margin(size, reach);
     let mut out = Aabb::EMPTY;
     for i in 0..3 {
         out.min[i] = if lo[i] <= -0.5 * far { f32::NEG_INFINITY } else { ((lo[i] - margin) as f32).max(clip.min[i]) };

@@ -350,7 +350,8 @@ fn disk_extent(m: &DMat3) -> DVec3 {
 pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
     let a = m.matrix3;
     let t = m.translation;
-    let to = |lo: DVec3, hi: DVec3| Aabb::new(lo.as_vec3(), hi.as_vec3());
+    // Grown by a margin and rounded outward (Aabb::enclosing).
+    let to = Aabb::enclosing;
     match c.kind {
         LeafKind::Sphere | LeafKind::Ellipsoid => {
             let e = DVec3::new(a.row(0).length(), a.row(1).length(), a.row(2).length());
@@ -367,10 +368,7 @@ pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
             let e = disk_extent(&a) + DVec3::new(a.row(0).length(), a.row(1).length(), a.row(2).length()) * rho;
             to(t - e, t + e)
         }
-        LeafKind::Cuboid => {
-            let m32 = Affine3A::from_mat3_translation(a.as_mat3(), t.as_vec3());
-            Aabb::new(c.p0.truncate(), c.p1.truncate()).transformed(&m32)
-        }
+        LeafKind::Cuboid => Aabb::new(c.p0.truncate(), c.p1.truncate()).transformed_f64(m),
         LeafKind::HalfSpace => {
             // Axis-aligned half-spaces are bounded on one side; others are not.
             let n = a.inverse().transpose() * c.p0.truncate().as_dvec3();
@@ -380,10 +378,12 @@ pub fn canonical_bounds(c: &Canonical, m: &DAffine3) -> Aabb {
                 if (nn[i].abs() - 1.0).abs() < 1e-12 {
                     // plane through the image of offset * n_local
                     let p = m.transform_point3(c.p0.truncate().as_dvec3() * c.p0.w as f64);
+                    // Rounded outward with a margin, as Aabb::enclosing.
+                    let margin = crate::aabb::span_margin(0.0, p[i].abs());
                     if nn[i] > 0.0 {
-                        b.max[i] = p[i] as f32
+                        b.max[i] = ((p[i] + margin) as f32).next_up()
                     } else {
-                        b.min[i] = p[i] as f32
+                        b.min[i] = ((p[i] - margin) as f32).next_down()
                     }
                 }
             }
@@ -420,7 +420,10 @@ pub const MAX_COORD: f64 = 1e30;
 /// which is 0 in f32: it vanished without an error.
 pub const MIN_SIZE: f64 = 1e-30;
 
-const RANGE_SLACK: f64 = 1.0 + 1e-6;
+/// Slack of the range checks: the bounds are written in f32 (1e30 read as
+/// f32 is 1.0000000150e30) and grown by `aabb::span_margin` (at most 4e-5
+/// of their reach).
+const RANGE_SLACK: f64 = 1.0 + 1e-4;
 
 /// The supported range of a torus's minor-to-major radius ratio, as far as
 /// it is measured (tests/stress.rs `torus_ratios`: with rays mapped to the
@@ -476,8 +479,7 @@ fn check_own_sizes(shape: &LeafShape, m: &DMat3) -> Result<(), LeafError> {
 fn check_range(m: &DMat3, bounds: Option<&Aabb>, anchor: Vec3) -> Result<(), LeafError> {
     for (k, c) in [m.x_axis, m.y_axis, m.z_axis].iter().enumerate() {
         let l = c.length();
-        // (1e-6 of slack: the bounds themselves are written in f32, and 1e30
-        // read as f32 is 1.0000000150e30.)
+        // (RANGE_SLACK: f32 bounds with a margin.)
         if !(MIN_SIZE / RANGE_SLACK..=MAX_COORD * RANGE_SLACK).contains(&l) {
             return Err(LeafError::OutOfRange(format!(
                 "its size (radius, length or scale along its local axis {k}) is {l:.3e} after transforms, outside the supported {MIN_SIZE:e} to {MAX_COORD:e}"
@@ -613,7 +615,6 @@ impl LeafTable {
         // coordinates (their local bounds can lie anywhere): anchor at the node's origin.
         let anchor = world_from_node.translation.as_vec3();
         let (inv32, b) = Self::inverse32(world_from_node, anchor)?;
-        let m32 = Affine3A::from_mat3_translation(world_from_node.matrix3.as_mat3(), world_from_node.translation.as_vec3());
         // The node's own scale (the data's coordinates are checked as bounds below).
         let (kind, ext, local) = match data {
             LeafData::SweptSphere(d) => {
@@ -635,7 +636,7 @@ impl LeafTable {
                 (LeafKind::Mesh, ext, d.local_bounds())
             }
         };
-        let bounds = local.transformed(&m32);
+        let bounds = local.transformed_f64(world_from_node);
         check_range(&world_from_node.matrix3, Some(&bounds), anchor)?;
         let i = self.kind.len() as u32;
         self.kind.push(kind);
@@ -1171,5 +1172,52 @@ pub fn push_clipped<S: SpanSink + ?Sized>(out: &mut S, span: Span, tmin: f32, tm
     let (t1, s1) = if t1 > tmax || !t1.is_finite() { (t1.min(tmax), Surf::NONE) } else { (t1, s1) };
     if t1 > t0 {
         out.push_span(Span { t0, t1, s0, s1 });
+    }
+}
+
+#[cfg(test)]
+mod bounds_tests {
+    use super::*;
+    use rand::{rngs::SmallRng, Rng, SeedableRng};
+
+    /// Leaf bounds hold the solid's extreme points computed in f64, also
+    /// 5e3 from the origin where an f32 is 4.9e-4 apart (rounded to the
+    /// nearest f32 they lost up to half of that).
+    #[test]
+    fn leaf_bounds_hold_the_f64_solid_far_from_the_origin() {
+        let seed = 0xb0u64;
+        println!("seed {seed:#x}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let mut v = |s: f32| Vec3::new(rng.gen_range(-s..s), rng.gen_range(-s..s), rng.gen_range(-s..s));
+        for i in 0..2000 {
+            let (c, h, off) =
+                (v(3.0), v(0.5).abs() + Vec3::splat(0.01), v(1.0).as_dvec3() + DVec3::new(3072.0, -2048.0, 5120.0) * (i % 3) as f64);
+            let m = DAffine3::from_translation(off);
+            let mut t = LeafTable::default();
+            // Extreme points in f64 of a sphere and a box.
+            let (shape, extremes): (LeafShape, Vec<DVec3>) = if i % 2 == 0 {
+                let r = h.x;
+                let cc = c.as_dvec3() + off;
+                let e = [DVec3::X, DVec3::Y, DVec3::Z, -DVec3::X, -DVec3::Y, -DVec3::Z].map(|a| cc + a * r as f64).to_vec();
+                (LeafShape::Sphere(Sphere { center: c, radius: r }), e)
+            } else {
+                let (lo, hi) = (c - h, c + h);
+                let e = (0..8)
+                    .map(|k| {
+                        let p = Vec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][(k >> 2) & 1]);
+                        p.as_dvec3() + off
+                    })
+                    .collect();
+                (LeafShape::Cuboid(Cuboid { min: lo, max: hi }), e)
+            };
+            t.push(&shape, &m).expect("valid leaf");
+            let b = t.bounds[0];
+            for p in extremes {
+                assert!(
+                    b.min.as_dvec3().cmplt(p).all() && p.cmplt(b.max.as_dvec3()).all(),
+                    "case {i}: {shape:?} at {off}: point {p} outside {b:?}"
+                );
+            }
+        }
     }
 }
