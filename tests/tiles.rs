@@ -78,13 +78,16 @@ fn packet_in_pyramid(rng: &mut SmallRng, o: DVec3, e: &[DVec3; 4]) -> Vec<Ray> {
 /// A random scene: a deep tree (with meshes in every fourth case), up to two
 /// more objects (wide nodes among them), sometimes a ground plane (an
 /// unbounded object). Its mesh files are removed once baked.
-fn random_scene(rng: &mut SmallRng, case: u32) -> (Vec<Shape>, rothray::engine::RenderScene) {
+fn random_scene(rng: &mut SmallRng, case: u32, off: DVec3) -> (Vec<Shape>, rothray::engine::RenderScene) {
     let mut trees = vec![random_tree_with(rng, 3, case.is_multiple_of(4))];
     for _ in 0..rng.gen_range(0..3) {
         trees.push(if rng.gen_bool(0.5) { wide_tree(rng) } else { random_tree(rng, 2) });
     }
     if rng.gen_bool(0.3) {
         trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(rng, 0.2), d: -1.2 });
+    }
+    if off != DVec3::ZERO {
+        trees = trees.into_iter().map(|t| translated(t, off)).collect();
     }
     let scene = bake(&trees);
     remove_mesh_files(&trees);
@@ -106,17 +109,30 @@ fn key(h: Option<rothray::engine::Hit>) -> Option<(u32, u32, u32, u32, [u32; 3])
 
 #[test]
 fn tile_programs_give_every_ray_the_whole_programs_answer() {
+    tile_programs(DVec3::ZERO, 24);
+}
+
+/// The same with every scene moved 3e3 to 5e3 from the origin (f32 points
+/// 2.4e-4 to 4.9e-4 apart there): leaf bounds, tile regions and box tests
+/// round otherwise than near the origin.
+#[test]
+fn tile_programs_give_every_ray_the_whole_programs_answer_far_from_origin() {
+    tile_programs(DVec3::new(3072.3, -2048.7, 5120.1), 8);
+}
+
+fn tile_programs(off: DVec3, seeds: u64) {
     let (mut rays, mut pruned, mut kept, mut culled, mut tiles, mut hits) = (0u64, 0u64, 0u64, 0u64, 0u64, 0u64);
-    for seed in 0..24u64 {
+    for seed in 0..seeds {
         let seed = 0x711e0 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..25 {
-            let (trees, scene) = random_scene(&mut rng, case);
+            let (trees, scene) = random_scene(&mut rng, case, off);
             let mut ps = PacketScratch::default();
             let mut ts = TileScratch::default();
             for t in 0..12 {
                 let (o, d) = random_ray(&mut rng);
-                let d = d.normalize();
+                // The origin an f32 point (a tile's region must hold its rays).
+                let (o, d) = ((o + off).as_vec3().as_dvec3(), d.normalize());
                 // A tile: a narrow pyramid around d (sometimes wide enough to
                 // cut through several objects).
                 let half = if t % 3 == 0 { (0.3, 0.2) } else { (rng.gen_range(0.002..0.05), rng.gen_range(0.002..0.05)) };
@@ -158,27 +174,42 @@ fn tile_programs_give_every_ray_the_whole_programs_answer() {
 fn shadow_tiles_give_every_ray_the_whole_programs_answer() {
     // Shadow rays: a box of origins swept along one direction (a tile's hits
     // towards a directional light). Any-hit, with and without the tile.
+    shadow_tiles(DVec3::ZERO, 16);
+}
+
+/// The same with every scene moved 3e3 to 5e3 from the origin.
+#[test]
+fn shadow_tiles_give_every_ray_the_whole_programs_answer_far_from_origin() {
+    shadow_tiles(DVec3::new(3072.3, -2048.7, 5120.1), 6);
+}
+
+fn shadow_tiles(off: DVec3, seeds: u64) {
     let (mut rays, mut blocked, mut culled) = (0u64, 0u64, 0u64);
-    for seed in 0..16u64 {
+    for seed in 0..seeds {
         let seed = 0x5ad0 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..25 {
-            let (trees, scene) = random_scene(&mut rng, case);
+            let (trees, scene) = random_scene(&mut rng, case, off);
             let mut ts = TileScratch::default();
             let mut scratch = rothray::csg::Scratch::default();
             for t in 0..12 {
-                let c = rp(&mut rng, 1.5);
+                let c = rp(&mut rng, 1.5) + off;
                 let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
                 let dir = rp(&mut rng, 1.0).normalize_or(DVec3::Y);
-                let org = rothray::primitives::Aabb::new((c - h).as_vec3(), (c + h).as_vec3());
+                let packet: Vec<Ray> = (0..8)
+                    .map(|_| to_ray(c + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h, dir))
+                    .collect();
+                // The box of the rays' own (f32) origins, as the renderer makes it.
+                let mut org = rothray::primitives::Aabb::EMPTY;
+                for r in &packet {
+                    org.grow(r.origin);
+                }
                 let region = Frustum::sweep(&org, dir.as_vec3());
                 let any = scene.prepare_tile(&region, &mut ts);
                 culled += (!any) as u64;
-                for k in 0..8 {
-                    let o = c + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h;
-                    let r = to_ray(o, dir);
-                    let whole = scene.occluded(&r);
-                    let tiled = any && scene.occluded_in(&r, &mut scratch, Some(&ts.view()));
+                for (k, r) in packet.iter().enumerate() {
+                    let whole = scene.occluded(r);
+                    let tiled = any && scene.occluded_in(r, &mut scratch, Some(&ts.view()));
                     assert_eq!(
                         tiled,
                         whole,
