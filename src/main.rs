@@ -577,6 +577,7 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "packet_leaf_scalar_lanes": st.eval.leaf_scalar,
         "union_first_entry_lanes": st.eval.first_settled,
         "union_walked_lanes": st.eval.first_walked,
+        "union_listed_collects": st.eval.listed_collects,
     })
 }
 

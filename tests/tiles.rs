@@ -23,10 +23,13 @@ fn wide_tree(rng: &mut SmallRng) -> Shape {
             1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.4)) },
             _ => random_leaf(rng, true),
         };
-        if rng.gen_bool(0.3) {
-            random_xf(rng, s)
-        } else {
-            s
+        let s = if rng.gen_bool(0.3) { random_xf(rng, s) } else { s };
+        // Small CSG subtrees too (a forest of cut trees): their union's
+        // rays collect candidates from a tile's list (`Program::collect`).
+        match rng.gen_range(0..6) {
+            0 => Shape::Inter(vec![s, Shape::Sphere { c: c + rp(rng, 0.1), r: rng.gen_range(0.1..0.3) }]),
+            1 => Shape::Diff(vec![s, Shape::Plane { n: rp(rng, 1.0) + DVec3::Y * 0.1, d: rng.gen_range(-0.1..0.1) + c.y }]),
+            _ => s,
         }
     };
     let mut kids: Vec<Shape> = (0..n).map(|_| small(rng)).collect();
@@ -122,6 +125,7 @@ fn tile_programs_give_every_ray_the_whole_programs_answer_far_from_origin() {
 
 fn tile_programs(off: DVec3, seeds: u64) {
     let (mut rays, mut pruned, mut kept, mut culled, mut tiles, mut hits) = (0u64, 0u64, 0u64, 0u64, 0u64, 0u64);
+    let _ = rothray::csg::take_eval_counts();
     for seed in 0..seeds {
         let seed = 0x711e0 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
@@ -165,7 +169,9 @@ fn tile_programs(off: DVec3, seeds: u64) {
             kept += c.spec.leaves_kept;
         }
     }
-    println!("{rays} rays in {tiles} tiles ({culled} tiles culled), {hits} hits; leaves pruned {pruned}, kept {kept}");
+    let listed = rothray::csg::take_eval_counts().listed_collects;
+    println!("{rays} rays in {tiles} tiles ({culled} tiles culled), {hits} hits; leaves pruned {pruned}, kept {kept}; wide unions' candidates from tile lists {listed}");
+    assert!(listed > 100, "too few wide unions of subtrees collected from tile lists to test: {listed}");
     // The tiles must prune for the test to mean anything.
     assert!(culled > 100 && pruned * 8 > kept && hits > rays / 5, "too little pruning or too few hits to test");
 }
@@ -185,6 +191,7 @@ fn shadow_tiles_give_every_ray_the_whole_programs_answer_far_from_origin() {
 
 fn shadow_tiles(off: DVec3, seeds: u64) {
     let (mut rays, mut blocked, mut culled) = (0u64, 0u64, 0u64);
+    let _ = rothray::csg::take_eval_counts();
     for seed in 0..seeds {
         let seed = 0x5ad0 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
@@ -222,7 +229,9 @@ fn shadow_tiles(off: DVec3, seeds: u64) {
             }
         }
     }
-    println!("{rays} shadow rays, {blocked} blocked, {culled} sweeps meeting nothing");
+    let listed = rothray::csg::take_eval_counts().listed_collects;
+    println!("{rays} shadow rays, {blocked} blocked, {culled} sweeps meeting nothing; wide unions' candidates from tile lists {listed}");
+    assert!(listed > 100, "too few wide unions of subtrees collected from tile lists to test: {listed}");
     assert!(blocked > rays / 5 && culled > 50, "too few blocked rays or culled sweeps to test");
 }
 

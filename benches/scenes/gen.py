@@ -509,9 +509,35 @@ def knob_obj(path):
             f.write("f %d %d %d\n" % (a + 1, b + 1, c + 1))
 
 
+def forest_cut():
+    """A forest of 10 000 cut trees: scenes/forest (the example) with every
+    leaf made a small CSG subtree (a ball with its bottom cut off by a
+    half-space, a cone cut to a box, a trunk minus a notch): a wide union
+    whose children are not leaves."""
+    with open(os.path.join(HERE, "forest.json")) as f:
+        base = json.load(f)
+    trees = []
+    for t in base["objects"][1]["shape"]["union"]:
+        if "sphere" in t:
+            c, r = t["sphere"]["center"], t["sphere"]["radius"]
+            trees.append(I(t, plane([0, -1, 0], -(c[1] - 0.3 * r))))
+        elif "cone" in t:
+            a, b = t["cone"]["a"], t["cone"]["b"]
+            ra = t["cone"]["radius_a"]
+            h = b[1] - a[1]
+            trees.append(I(t, box([a[0] - ra, a[1] + 0.05 * h, a[2] - ra],
+                                  [a[0] + ra, b[1], a[2] + ra])))
+        else:
+            b, r = t["cylinder"]["b"], t["cylinder"]["radius"]
+            trees.append(D(t, sphere([b[0] + r, b[1], b[2]], 0.6 * r)))
+    base["name"] = "forest_cut"
+    base["objects"][1]["shape"]["union"] = trees
+    return base
+
+
 SCENES = {f.__name__: f for f in (polytopes, nesting, capsules, gear, tori,
                                   fill, ground, mesh_cut, mesh_mold,
-                                  sweep_csg)}
+                                  sweep_csg, forest_cut)}
 
 
 def main(argv):

@@ -16,6 +16,7 @@ thread_local! {
     static LEAF_SCALAR: Cell<u64> = const { Cell::new(0) };
     static FIRST_SETTLED: Cell<u64> = const { Cell::new(0) };
     static FIRST_WALKED: Cell<u64> = const { Cell::new(0) };
+    static LISTED: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -49,6 +50,9 @@ pub struct EvalCounts {
     /// near tie, a short first span, a ray starting inside a child, a
     /// child without a packet kernel, or an unbounded child).
     pub first_walked: u64,
+    /// Wide-union queries whose candidates came from a tile's list instead
+    /// of the union's tree (`Program::collect`).
+    pub listed_collects: u64,
 }
 
 impl EvalCounts {
@@ -64,6 +68,7 @@ impl EvalCounts {
         self.leaf_scalar += o.leaf_scalar;
         self.first_settled += o.first_settled;
         self.first_walked += o.first_walked;
+        self.listed_collects += o.listed_collects;
     }
 }
 
@@ -108,6 +113,11 @@ pub(crate) fn first_entries(settled: u32, walked: u32) {
     FIRST_WALKED.with(|x| x.set(x.get() + walked as u64));
 }
 
+#[inline(always)]
+pub(crate) fn listed_collect() {
+    bump(&LISTED);
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -121,5 +131,6 @@ pub fn take_eval_counts() -> EvalCounts {
         leaf_scalar: LEAF_SCALAR.with(|c| c.replace(0)),
         first_settled: FIRST_SETTLED.with(|c| c.replace(0)),
         first_walked: FIRST_WALKED.with(|c| c.replace(0)),
+        listed_collects: LISTED.with(|c| c.replace(0)),
     }
 }

@@ -415,6 +415,8 @@ pub struct Scratch {
     pub cands: Vec<(f32, u32)>,
     /// A caller's queue for [`rothray_primitives::bvh::FlatBvh::visit_nearest`].
     pub queue: rothray_primitives::bvh::NearestQueue,
+    /// The entries of a tile's list that a ray meets ([`TileList::for_rays`]).
+    met: Vec<u32>,
 }
 
 /// Builds a [`Program`] bottom-up.
@@ -983,15 +985,18 @@ impl Program {
         let ray = &ctx.ray;
         let w = self.wide_of(n);
         let lo = scratch.cand.len();
+        if !(skip == 0 && self.lists_len > 0 && !self.leafy[n] && self.collect_listed(n, ray, (tmin, tmax), scratch)) {
+            let cand = &mut scratch.cand;
+            w.bvh.traverse(ray.origin, ray.inv_dir, tmin, tmax, |pos, _| {
+                let c = self.child_at(n, pos);
+                if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.origin, ray.inv_dir, tmin, tmax) {
+                    cand.push((pos, t0));
+                    counts::wide_child();
+                }
+                tmax
+            });
+        }
         let cand = &mut scratch.cand;
-        w.bvh.traverse(ray.origin, ray.inv_dir, tmin, tmax, |pos, _| {
-            let c = self.child_at(n, pos);
-            if let Some((t0, _)) = self.bounds[c as usize].ray_range(ray.origin, ray.inv_dir, tmin, tmax) {
-                cand.push((pos, t0));
-                counts::wide_child();
-            }
-            tmax
-        });
         for &pos in &w.unbounded {
             if pos >= skip {
                 cand.push((pos, tmin));
@@ -1000,6 +1005,29 @@ impl Program {
         // The same order whichever tree listed them (a tile's short list or
         // the baked BVH).
         sort_cands(&mut cand[lo..]);
+    }
+
+    /// [`Program::collect`]'s candidates of wide union `n` (of subtrees:
+    /// not leafy) from the tile's list of its bounded children, if the tile
+    /// made one and the ray is a ray of its plane; `false` when not (the
+    /// caller walks the tree). The list holds every child whose box the
+    /// tile's region touches, filtered by their shadows on the tile's ray
+    /// plane: the same candidates as the tree's (a forest of 10 000 trees
+    /// cut by half-spaces walked the union's tree along every ray, 45% of
+    /// its cycles, perf). Out of line: the tree walk's caller stays as it
+    /// was (callgrind: fill +0.8% instructions inlined).
+    #[inline(never)]
+    fn collect_listed(&self, n: usize, ray: &Ray, (tmin, tmax): (f32, f32), scratch: &mut Scratch) -> bool {
+        let Some((list, plane)) = self.list_of(n as u32) else { return false };
+        let Some(met) = list.for_rays(plane, (&[ray.origin; 8], &[ray.dir; 8]), 1, &mut scratch.met) else { return false };
+        counts::listed_collect();
+        for (pos, b) in met {
+            if let Some((t0, _)) = b.ray_range(ray.origin, ray.inv_dir, tmin, tmax) {
+                scratch.cand.push((pos, t0));
+                counts::wide_child();
+            }
+        }
+        true
     }
 
     /// The next child node to evaluate for frame `top`, or `None` when it is

@@ -229,7 +229,14 @@ impl Spec<'_> {
         // them (up to LIST_MAX), so count that far; only where packets walk
         // it (in nearest mode: cheese's union of 1000 holes, a subtrahend,
         // paid 2-3% of its instructions for lists no packet read).
-        let listing = nearest && kind == NodeKind::Union && b.is_packet_union(n) && self.ray_plane();
+        // So does a wide union of subtrees, in either mode, whose rays
+        // collect their candidates from the list (`Program::collect`; a
+        // leafy union that packets do not walk reads no list: its rays walk
+        // its tree).
+        let listing = kind == NodeKind::Union && ((nearest && b.is_packet_union(n)) || !b.leafy[nu]) && self.ray_plane();
+        // (A union of subtrees keeps the box test: with 6 children met or
+        // fewer it becomes a narrow union of just those.)
+        let packet_list = listing && b.is_packet_union(n);
         let unbounded = self.tp.kids.len() - at;
         {
             // The children of the tree's leaves whose boxes the region
@@ -252,7 +259,7 @@ impl Spec<'_> {
                 || kids.borrow().len() < limit,
                 |pos| {
                     let mut k = kids.borrow_mut();
-                    if k.len() < limit && (listing || region.touches_box(&bounds[children[pos as usize] as usize])) {
+                    if k.len() < limit && (packet_list || region.touches_box(&bounds[children[pos as usize] as usize])) {
                         k.push(pos);
                     }
                 },
