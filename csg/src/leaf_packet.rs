@@ -25,6 +25,8 @@ use rothray_primitives::{
 
 use super::PacketMemo;
 use crate::counts;
+use crate::tile_list::TileList;
+use rothray_primitives::ray_plane::RayPlane;
 
 /// Cached leaves per packet (a direct-mapped table by leaf index: a
 /// collision only costs a second solve).
@@ -48,6 +50,20 @@ pub(crate) struct LeafRecords {
     d: [Vec3; 8],
     /// Per torus slot: (leaf, generation, its lanes' preps).
     tori: Vec<(u32, u32, [Option<TorusPrep>; 8])>,
+    /// The entries of one tile list that the packet's rays meet.
+    list_met: ListMet,
+}
+
+/// [`PacketMemo::with_list_met`]'s record: one list (a tile's union of
+/// subtrees; a packet's lanes ask the same one in turn).
+#[derive(Debug, Default)]
+struct ListMet {
+    /// (Program address, union node) of the list.
+    key: (usize, u32),
+    generation: u32,
+    /// Whether every lane's ray is a ray of the list's plane.
+    ok: bool,
+    met: Vec<u32>,
 }
 
 impl LeafRecords {
@@ -133,6 +149,32 @@ impl PacketMemo {
 }
 
 impl PacketMemo {
+    /// `f` of the entries of `list` (of union `key`: program address and
+    /// node) whose shadows meet the box of the packet's rays' points on
+    /// `plane` ([`TileList::met_by`], made when the first lane asks), for
+    /// lane `k`; `None` when the packet does not answer (no rays set, the
+    /// lane is not in the packet, or a ray is not a ray of the plane). A
+    /// superset of the entries lane `k`'s own point meets.
+    #[inline]
+    pub(crate) fn with_list_met<R>(
+        &self,
+        key: (usize, u32),
+        (list, plane): (&TileList, &RayPlane),
+        k: usize,
+        f: impl FnOnce(&TileList, &[u32]) -> R,
+    ) -> Option<R> {
+        let mut guard = self.leaf_solves.borrow_mut();
+        let LeafRecords { lanes, generation, o, d, list_met, .. } = &mut *guard;
+        if *lanes & (1 << k) == 0 {
+            return None;
+        }
+        if list_met.key != key || list_met.generation != *generation {
+            list_met.ok = list.met_by(plane, (o, d), *lanes, &mut list_met.met);
+            (list_met.key, list_met.generation) = (key, *generation);
+        }
+        list_met.ok.then(|| f(list, &list_met.met))
+    }
+
     /// `f` of the packet's solve of analytic leaf `i` (which must have a
     /// packet kernel) for every lane, from its record (made now when no lane
     /// asked before), or `None` when the packet solves no leaves.

@@ -985,7 +985,7 @@ impl Program {
         let ray = &ctx.ray;
         let w = self.wide_of(n);
         let lo = scratch.cand.len();
-        if !(skip == 0 && self.lists_len > 0 && !self.leafy[n] && self.collect_listed(n, ray, (tmin, tmax), scratch)) {
+        if !(skip == 0 && self.lists_len > 0 && !self.leafy[n] && self.collect_listed(n, ctx, (tmin, tmax), scratch)) {
             let cand = &mut scratch.cand;
             w.bvh.traverse(ray.origin, ray.inv_dir, tmin, tmax, |pos, _| {
                 let c = self.child_at(n, pos);
@@ -1017,16 +1017,34 @@ impl Program {
     /// its cycles, perf). Out of line: the tree walk's caller stays as it
     /// was (callgrind: fill +0.8% instructions inlined).
     #[inline(never)]
-    fn collect_listed(&self, n: usize, ray: &Ray, (tmin, tmax): (f32, f32), scratch: &mut Scratch) -> bool {
-        let Some((list, plane)) = self.list_of(n as u32) else { return false };
-        let Some(met) = list.for_rays(plane, (&[ray.origin; 8], &[ray.dir; 8]), 1, &mut scratch.met) else { return false };
-        counts::listed_collect();
-        for (pos, b) in met {
+    fn collect_listed(&self, n: usize, ctx: &RayCtx, (tmin, tmax): (f32, f32), scratch: &mut Scratch) -> bool {
+        let Some(listed) = self.list_of(n as u32) else { return false };
+        let ray = &ctx.ray;
+        let cand = &mut scratch.cand;
+        let push = |cand: &mut Vec<(u32, f32)>, (pos, b): (u32, &Aabb)| {
             if let Some((t0, _)) = b.ray_range(ray.origin, ray.inv_dir, tmin, tmax) {
-                scratch.cand.push((pos, t0));
+                cand.push((pos, t0));
                 counts::wide_child();
             }
+        };
+        // In a packet, the entries its rays' points meet, found once for
+        // all lanes (each lane then tests their boxes: the same candidates).
+        let key = (self as *const Program as usize, n as u32);
+        let packet = ctx.memo.and_then(|(memo, k)| {
+            memo.with_list_met(key, listed, k, |list, met| {
+                for &i in met {
+                    push(cand, list.entry(i));
+                }
+            })
+        });
+        if packet.is_none() {
+            let (list, plane) = listed;
+            let Some(met) = list.for_rays(plane, (&[ray.origin; 8], &[ray.dir; 8]), 1, &mut scratch.met) else { return false };
+            for e in met {
+                push(cand, e);
+            }
         }
+        counts::listed_collect();
         true
     }
 

@@ -60,15 +60,26 @@ impl TileList {
     pub(crate) fn for_rays<'a>(
         &'a self,
         plane: &RayPlane,
-        (o, d): (&[Vec3; 8], &[Vec3; 8]),
+        rays: (&[Vec3; 8], &[Vec3; 8]),
         lanes: u32,
         met: &'a mut Vec<u32>,
     ) -> Option<impl Iterator<Item = (u32, &'a Aabb)> + 'a> {
+        if !self.met_by(plane, rays, lanes, met) {
+            return None;
+        }
+        Some(met.iter().map(move |&i| self.entry(i)))
+    }
+
+    /// [`TileList::for_rays`]'s entries as indices into the list (into
+    /// `met`, for [`TileList::entry`]); `false` when a lane's ray is not a
+    /// ray of `plane`.
+    pub(crate) fn met_by(&self, plane: &RayPlane, (o, d): (&[Vec3; 8], &[Vec3; 8]), lanes: u32, met: &mut Vec<u32>) -> bool {
         let mut pts = [[0.0f64; 2]; 8];
         let mut n = 0;
         for k in 0..8 {
             if lanes & (1 << k) != 0 {
-                pts[n] = plane.point(o[k], d[k])?;
+                let Some(p) = plane.point(o[k], d[k]) else { return false };
+                pts[n] = p;
                 n += 1;
             }
         }
@@ -82,6 +93,12 @@ impl TileList {
             m += meets(&pb, s) as usize;
         }
         met.truncate(m);
-        Some(met.iter().map(move |&i| (self.pos[i as usize], &self.boxes[i as usize])))
+        true
+    }
+
+    /// Entry `i` of the list: the child's position and its box.
+    #[inline(always)]
+    pub(crate) fn entry(&self, i: u32) -> (u32, &Aabb) {
+        (self.pos[i as usize], &self.boxes[i as usize])
     }
 }
