@@ -247,7 +247,9 @@ fn tiles_of_many_objects_keep_ties_between_objects() {
         let seed = 0x0b1ec7 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..6 {
-            let n = rng.gen_range(20..90);
+            // Around the most a tile lists, so that wide tiles walk the tree.
+            let most = rothray::engine::tile::OBJECT_LIST;
+            let n = rng.gen_range(most * 2 / 3..most * 3);
             let mut trees: Vec<Shape> = (0..n)
                 .map(|_| {
                     let c = rp(&mut rng, 1.5);

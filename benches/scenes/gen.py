@@ -535,9 +535,23 @@ def forest_cut():
     return base
 
 
+def forest_objects():
+    """A forest of 10 000 objects: scenes/forest (the example) with every
+    tree its own object instead of a child of one union (the objects' tree
+    and the tiles' object lists, not a wide CSG node)."""
+    with open(os.path.join(HERE, "forest.json")) as f:
+        base = json.load(f)
+    objs = [base["objects"][0]]
+    for i, t in enumerate(base["objects"][1]["shape"]["union"]):
+        objs.append(obj("tree%d" % i, t, base["objects"][1]["color"]))
+    base["name"] = "forest_objects"
+    base["objects"] = objs
+    return base
+
+
 SCENES = {f.__name__: f for f in (polytopes, nesting, capsules, gear, tori,
                                   fill, ground, mesh_cut, mesh_mold,
-                                  sweep_csg, forest_cut)}
+                                  sweep_csg, forest_cut, forest_objects)}
 
 
 def main(argv):

@@ -16,7 +16,7 @@ const NONE: u32 = u32::MAX;
 /// A tile that meets at most this many bounded objects lists them: its rays
 /// test those objects' boxes instead of walking the tree of all the scene's
 /// objects (see `RenderScene::visit_candidates`).
-pub const OBJECT_LIST: usize = 32;
+pub const OBJECT_LIST: usize = 128;
 
 /// Per-thread memory of the tile level, reused from tile to tile.
 #[derive(Default)]
