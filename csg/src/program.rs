@@ -985,7 +985,10 @@ impl Program {
         let ray = &ctx.ray;
         let w = self.wide_of(n);
         let lo = scratch.cand.len();
-        if !(skip == 0 && self.lists_len > 0 && !self.leafy[n] && self.collect_listed(n, ctx, (tmin, tmax), scratch)) {
+        // A union of subtrees that the tile listed takes its candidates
+        // from the list; anything else walks the node's tree.
+        let listed = skip == 0 && self.lists_len > 0 && !self.leafy[n] && self.collect_listed(n, ctx, (tmin, tmax), scratch);
+        if !listed {
             let cand = &mut scratch.cand;
             w.bvh.traverse(ray.origin, ray.inv_dir, tmin, tmax, |pos, _| {
                 let c = self.child_at(n, pos);

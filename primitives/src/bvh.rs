@@ -57,7 +57,6 @@ pub struct FlatBvh {
 /// or 1 for a primitive, id), smallest first.
 pub type NearestQueue = Vec<std::cmp::Reverse<(u32, u32, u32)>>;
 
-/// `t`'s bits as an integer in `f32::total_cmp` order.
 /// obvhs' `CwBvh` culls every box the ray leaves before t = 1e-4 (its
 /// EPSILON), whatever `ray.tmin` says. So it walks our ray with t scaled by
 /// `T_SCALE`, a power of two: `t' = t * T_SCALE`, the same origin, `inv_d *
@@ -75,6 +74,8 @@ const T_SCALE: f32 = (1u64 << 20) as f32;
 /// 2^28.
 const INV_LIMIT: f32 = (1u128 << 90) as f32;
 
+/// The obvhs ray of our ray `o + t / inv_d` on `[tmin, tmax]`, t scaled by
+/// `T_SCALE`; `None` for a ray that meets nothing.
 fn scaled_ray(o: Vec3, inv_d: Vec3, tmin: f32, tmax: f32) -> Option<ORay> {
     // A zero direction (every inverse infinite) meets nothing.
     if !o.is_finite() || inv_d.is_nan() || inv_d.abs().cmpeq(Vec3::INFINITY).all() {
@@ -92,6 +93,7 @@ fn scaled_ray(o: Vec3, inv_d: Vec3, tmin: f32, tmax: f32) -> Option<ORay> {
     Some(ORay { origin: o.into(), direction: dir.into(), inv_direction: inv.into(), tmin: tmin * T_SCALE, tmax: tmax * T_SCALE })
 }
 
+/// `t`'s bits as an integer in `f32::total_cmp` order.
 fn ordered(t: f32) -> u32 {
     let b = t.to_bits();
     if b & 0x8000_0000 != 0 {
