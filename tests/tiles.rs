@@ -81,7 +81,7 @@ fn packet_in_pyramid(rng: &mut SmallRng, o: DVec3, e: &[DVec3; 4]) -> Vec<Ray> {
 /// A random scene: a deep tree (with meshes in every fourth case), up to two
 /// more objects (wide nodes among them), sometimes a ground plane (an
 /// unbounded object). Its mesh files are removed once baked.
-fn random_scene(rng: &mut SmallRng, case: u32, off: DVec3) -> (Vec<Shape>, rothray::engine::RenderScene) {
+pub(crate) fn random_scene(rng: &mut SmallRng, case: u32, off: DVec3) -> (Vec<Shape>, rothray::engine::RenderScene) {
     let mut trees = vec![random_tree_with(rng, 3, case.is_multiple_of(4))];
     for _ in 0..rng.gen_range(0..3) {
         trees.push(if rng.gen_bool(0.5) { wide_tree(rng) } else { random_tree(rng, 2) });

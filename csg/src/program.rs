@@ -1222,6 +1222,10 @@ fn stop_at_first_entry(acc: &mut SpanList, hi: f32, mode: Mode, eps: f32) -> Opt
     }
     let v = match mode {
         Mode::All => return None,
+        // A span no longer than eps is not sure: `combine` drops it if a
+        // later operand has spans anywhere on the range, and cut short here
+        // the range would leave them nothing to show.
+        Mode::Nearest if s.t1 - s.t0 <= eps => return None,
         Mode::Nearest => (s.t0 + 4.0 * eps).max(s.t0.next_up()),
         Mode::Before => s.t0,
     };
