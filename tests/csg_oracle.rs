@@ -432,3 +432,104 @@ fn nearest_hits_are_first_surfaces_of_random_scenes() {
     }
     assert_eq!(rays, 400_000);
 }
+
+/// An OBJ mesh of two cubes, [-1,1]^3 and [3,5]x[-1,1]x[-3,-1], written to
+/// the temporary folder as `name`; returns its path.
+fn two_cubes_obj(name: &str) -> std::path::PathBuf {
+    use std::fmt::Write;
+    let mut obj = String::new();
+    let mut nv = 0;
+    for (lo, hi) in [(DVec3::splat(-1.0), DVec3::splat(1.0)), (DVec3::new(3.0, -1.0, -3.0), DVec3::new(5.0, 1.0, -1.0))] {
+        for i in 0..8 {
+            let p = DVec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            );
+            writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
+        }
+        // Quads counter-clockwise seen from outside, split in two.
+        for q in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+            writeln!(obj, "f {} {} {}", nv + q[0] + 1, nv + q[1] + 1, nv + q[2] + 1).unwrap();
+            writeln!(obj, "f {} {} {}", nv + q[0] + 1, nv + q[2] + 1, nv + q[3] + 1).unwrap();
+        }
+        nv += 8;
+    }
+    let path = std::env::temp_dir().join(format!("rothray-oracle-{}-{name}.obj", std::process::id()));
+    std::fs::write(&path, obj).expect("write the two-cube mesh");
+    path
+}
+
+/// Nearest hit against the first surface of the full diagram for object
+/// shapes given as JSON, on the rays `ray(j)`; returns the mismatches.
+fn nearest_vs_diagram_on(shapes: &[String], rays: &dyn Fn(usize) -> rothray::engine::Ray, n: usize) -> Vec<String> {
+    let mut bad = Vec::new();
+    for (i, sh) in shapes.iter().enumerate() {
+        let text = format!(
+            r#"{{"camera": {{"eye": [0, 0, 6], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40}}, "objects": [{{"name": "o", "shape": {sh}}}]}}"#
+        );
+        let opts = rothray::io::LoadOptions { allow_paths: vec![std::env::temp_dir()] };
+        let sf = rothray::io::parse_scene_with(&text, std::path::Path::new("test.json"), &opts).expect("scene parses");
+        let scene = RenderScene::from_world(&sf.world).expect("scene bakes");
+        for j in 0..n {
+            let ray = rays(j);
+            let (one, want) = (scene.intersect(&ray).map(|h| h.t), nearest_in_diagrams(&scene, &ray, 1));
+            if one != want {
+                bad.push(format!("shape {i} ray {j}: nearest {one:?}, diagram {want:?} ({:?})", scene.spans(&ray, 0)));
+            }
+        }
+    }
+    bad
+}
+
+#[test]
+fn grazed_mesh_operands() {
+    // Regression: a mesh of two cubes, the ray grazing the first's edge over
+    // a chord of 1e-8 to 1e-3, then crossing the second. A nearest-mode mesh
+    // query stops just past its first entry: that of the short span. In a
+    // union with a ball inside the second cube, or minus that ball, the ball
+    // was then asked only up to there (empty), and the short span stayed;
+    // the full diagram merges it with the ball and drops it (27 of 51 rays
+    // each, before a leaf query that stops at a short first span was asked
+    // again in full). Also the mesh alone, cut by a half-space, and
+    // subtracted from a box.
+    let path = two_cubes_obj("two-cubes");
+    let mesh = format!("{{\"mesh\":{{\"path\":{:?}}}}}", path.to_string_lossy());
+    let ball = r#"{"sphere":{"center":[4,0.1,-2],"radius":0.3}}"#;
+    let boxj = r#"{"box":{"min":[-1,-1,-1],"max":[1,1,1]}}"#;
+    let shapes = [
+        mesh.clone(),
+        format!("{{\"difference\":[{mesh},{ball}]}}"),
+        format!("{{\"difference\":[{mesh},{ball},{boxj}]}}"),
+        format!("{{\"union\":[{mesh},{ball}]}}"),
+        format!("{{\"union\":[{ball},{mesh}]}}"),
+        format!("{{\"intersection\":[{mesh},{{\"plane\":{{\"normal\":[0,1,0],\"offset\":0.5}}}}]}}"),
+        format!("{{\"difference\":[{boxj},{mesh}]}}"),
+    ];
+    // The line x + z = 2 - depth in the plane y = 0.1, towards +x -z.
+    let depth = |j: usize| 10f64.powf(-8.0 + 5.0 * j as f64 / 50.0);
+    let ray = |j: usize| to_ray(DVec3::new(-2.0, 0.1, 4.0 - depth(j)), DVec3::new(1.0, 0.0, -1.0));
+    let bad = nearest_vs_diagram_on(&shapes, &ray, 51);
+    let _ = std::fs::remove_file(&path);
+    assert!(bad.is_empty(), "{} mismatches:\n{}", bad.len(), bad.join("\n"));
+}
+
+#[test]
+#[ignore = "known bug: a subtrahend union stops at its first entry, which the positive operand's entry just before it fuses with"]
+fn near_flush_cutter() {
+    // A cube minus a union whose box's top face lies 1e-6 below the cube's
+    // (and a far ball). The full diagram fuses the two entries (within eps)
+    // and the cube's span then ends where the cutter's starts: nothing. The
+    // nearest query asks the cutter in Mode::Before, which stops right at
+    // its entry, so the difference keeps the cube's entry (51 of 51 rays).
+    // The same cutter as a single leaf is asked in full and agrees. Making
+    // the difference's result exact only up to 4 eps before a subtrahend's
+    // stop fixed these rays but broke a nested difference of meshes
+    // (`packets_and_single_rays_match_the_full_diagram_fuzz`); not solved.
+    let shapes = [
+        r#"{"difference":[{"box":{"min":[-1,-1,-1],"max":[1,1,1]}},{"union":[{"box":{"min":[-1.5,-1.5,-1.5],"max":[1.5,1.5,0.999999]}},{"sphere":{"center":[5,5,5],"radius":0.1}}]}]}"#.to_string(),
+    ];
+    let ray = |j: usize| to_ray(DVec3::new(0.1 + 1e-4 * j as f64, 0.2, 5.0), DVec3::new(0.01, 0.0, -1.0));
+    let bad = nearest_vs_diagram_on(&shapes, &ray, 51);
+    assert!(bad.is_empty(), "{} mismatches:\n{}", bad.len(), bad.join("\n"));
+}

@@ -270,9 +270,34 @@ impl<'a> MemoLanes<'a> {
     }
 }
 
-/// A leaf's query, from the ray's packet memo when it has the answer.
+/// Leaf `i`'s spans on `(lo, hi)` into the empty list `out` (all of them,
+/// or with `nearest`, what a nearest query needs); returns where they stop
+/// being exact.
 #[inline(always)]
-fn leaf_spans<S: SpanSink + ?Sized>(
+fn leaf_spans(leaves: &LeafTable, ctx: &RayCtx, i: u32, (lo, hi): (f32, f32), nearest: Option<f32>, out: &mut SpanList) -> f32 {
+    debug_assert!(out.is_empty());
+    let v = leaf_query(leaves, ctx, i, (lo, hi), nearest, out);
+    if v < hi && out.as_slice().first().is_some_and(|s| s.t1 - s.t0 <= ctx.eps) {
+        return full_again(leaves, ctx, i, (lo, hi), out);
+    }
+    v
+}
+
+/// A leaf that stopped just past a first span no longer than eps (a mesh
+/// grazed at an edge), asked again in full: `combine` drops that span once
+/// another operand has spans on the range, and the leaf's stop cut them
+/// away (tests/csg_oracle.rs `grazed_mesh_operands`). Out of line: rare.
+#[inline(never)]
+#[cold]
+fn full_again(leaves: &LeafTable, ctx: &RayCtx, i: u32, range: (f32, f32), out: &mut SpanList) -> f32 {
+    out.clear();
+    leaf_query(leaves, ctx, i, range, None, out)
+}
+
+/// [`leaf_spans`] as the leaf answers it (in nearest modes it may stop just
+/// past its first entry), from the ray's packet memo when it has the answer.
+#[inline(always)]
+fn leaf_query<S: SpanSink + ?Sized>(
     leaves: &LeafTable,
     ctx: &RayCtx,
     i: u32,
