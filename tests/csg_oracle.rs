@@ -515,17 +515,18 @@ fn grazed_mesh_operands() {
 }
 
 #[test]
-#[ignore = "known bug: a subtrahend union stops at its first entry, which the positive operand's entry just before it fuses with"]
 fn near_flush_cutter() {
-    // A cube minus a union whose box's top face lies 1e-6 below the cube's
-    // (and a far ball). The full diagram fuses the two entries (within eps)
-    // and the cube's span then ends where the cutter's starts: nothing. The
-    // nearest query asks the cutter in Mode::Before, which stops right at
-    // its entry, so the difference keeps the cube's entry (51 of 51 rays).
-    // The same cutter as a single leaf is asked in full and agrees. Making
-    // the difference's result exact only up to 4 eps before a subtrahend's
-    // stop fixed these rays but broke a nested difference of meshes
-    // (`packets_and_single_rays_match_the_full_diagram_fuzz`); not solved.
+    // Regression: a cube minus a union whose box's top face lies 1e-6 below
+    // the cube's (and a far ball). The full diagram fuses the two entries
+    // (within eps) and the cube's span then ends where the cutter's starts:
+    // nothing. The nearest query asked the cutter (`Mode::Before`) only up
+    // to its first entry, so the difference kept the cube's entry (51 of 51
+    // rays). A subtrahend entering within 2 eps of the positive operand's
+    // entry is now asked up to 4 eps past it, as a positive operand is. (The
+    // same cutter as a single leaf was asked in full and agreed. Making the
+    // difference's result exact only up to 4 eps before a subtrahend's stop
+    // fixed these rays but broke a nested difference of meshes in
+    // `packets_and_single_rays_match_the_full_diagram_fuzz`.)
     let shapes = [
         r#"{"difference":[{"box":{"min":[-1,-1,-1],"max":[1,1,1]}},{"union":[{"box":{"min":[-1.5,-1.5,-1.5],"max":[1.5,1.5,0.999999]}},{"sphere":{"center":[5,5,5],"radius":0.1}}]}]}"#.to_string(),
     ];
