@@ -595,3 +595,25 @@ fn near_twins_nearest_hits_are_first_surfaces() {
     }
     assert_eq!(rays, 150_000);
 }
+
+#[test]
+#[ignore = "open bug: a near-twin sliver difference, the ray starting inside"]
+fn near_twin_slivers_from_inside() {
+    // One of the 4 rays in 900 000 that still differ in the larger near-twin
+    // run (1 500 trees, seed 0x77, case 1433), minimised: (S - T') moved by
+    // 3e-5, minus (S - T'' - T), where S is a sphere and T', T'' are a torus
+    // T moved by 2e-5. The ray starts inside S. The nearest query hits T at
+    // 0.0298; the full diagram has nothing (and point classification cannot
+    // tell at this size). Not yet understood.
+    let shape = r#"{"difference":[{"transformed":{"translate":[1.4786156310588637e-05,-2.748444627796021e-06,-2.4295940701135698e-05],"shape":{"difference":[{"sphere":{"center":[-0.13262931649337095,0.30432019708824365,0.18940563698396296],"radius":0.9886724441341528}},{"transformed":{"translate":[1.0552175103705918e-05,-1.0670604095630437e-05,-1.7949908196547406e-05],"shape":{"transformed":{"translate":[0.0925900248395396,-0.15690054906013207,0.012337675856428088],"rotate_deg":[139.35390960527167,19.959414251206596,166.5909797406921],"scale":[1.0277918084510544,0.5117260691586586,0.545987601712118],"shape":{"torus":{"center":[0.3943646762278983,0.17839996412504533,0.03850505129189036],"axis":[0.5497843849401289,-0.9172632860831691,-0.14681148282574163],"major":0.5097308543197512,"minor":0.42891638486794287}}}}}}]}}},{"difference":[{"sphere":{"center":[-0.13262931649337095,0.30432019708824365,0.18940563698396296],"radius":0.9886724441341528}},{"transformed":{"translate":[1.0552175103705918e-05,-1.0670604095630437e-05,-1.7949908196547406e-05],"shape":{"transformed":{"translate":[0.0925900248395396,-0.15690054906013207,0.012337675856428088],"rotate_deg":[139.35390960527167,19.959414251206596,166.5909797406921],"scale":[1.0277918084510544,0.5117260691586586,0.545987601712118],"shape":{"torus":{"center":[0.3943646762278983,0.17839996412504533,0.03850505129189036],"axis":[0.5497843849401289,-0.9172632860831691,-0.14681148282574163],"major":0.5097308543197512,"minor":0.42891638486794287}}}}}},{"transformed":{"translate":[0.0925900248395396,-0.15690054906013207,0.012337675856428088],"rotate_deg":[139.35390960527167,19.959414251206596,166.5909797406921],"scale":[1.0277918084510544,0.5117260691586586,0.545987601712118],"shape":{"torus":{"center":[0.3943646762278983,0.17839996412504533,0.03850505129189036],"axis":[0.5497843849401289,-0.9172632860831691,-0.14681148282574163],"major":0.5097308543197512,"minor":0.42891638486794287}}}}]}]}"#;
+    let text = format!(
+        r#"{{"camera": {{"eye": [0, 0, 6], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40}}, "objects": [{{"name": "o", "shape": {shape}}}]}}"#
+    );
+    let sf = rothray::io::parse_scene_with(&text, std::path::Path::new("test.json"), &Default::default()).expect("scene parses");
+    let scene = RenderScene::from_world(&sf.world).expect("scene bakes");
+    let ray = rothray::engine::Ray::new(
+        glam::Vec3::new(0.006999917, -0.093656145, 0.41363698),
+        glam::Vec3::new(1.2009127, -0.7221188, -1.9700159),
+    );
+    nearest_is_first_surface(&scene, &ray, &|| "the reproducer".into());
+}
