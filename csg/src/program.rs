@@ -154,13 +154,15 @@ pub enum Mode {
     /// first entry they have confirmed (the result is exact on the returned
     /// range, that entry included).
     Nearest,
-    /// What a subtrahend of a nearest-mode difference needs: as
-    /// [`Mode::Nearest`] (up to a little past its first confirmed entry: a
-    /// subtrahend that stopped right at it hid it from a positive operand's
-    /// entry less than eps before, which the full diagram fuses with it,
-    /// tests/csg_oracle.rs `near_flush_cutter`), but a wide union walks its
-    /// own tree front to back rather than in the canonical order packets
-    /// share (scenes/cheese's 1000 holes: +12.5% instructions in that order).
+    /// What a subtrahend of a nearest-mode difference needs: exactness before
+    /// its first confirmed entry (the difference cannot start where the
+    /// subtrahend starts), so unions stop right at it; one entering within
+    /// 2 eps of its range start (the positive operand's entry) stops 4 eps
+    /// past it, as in [`Mode::Nearest`], so that the two entries fuse as in
+    /// the full diagram (tests/csg_oracle.rs `near_flush_cutter`). Leaves
+    /// take the nearest slack. A wide union walks its own tree front to back,
+    /// not the canonical order packets share (scenes/cheese's 1000 holes:
+    /// +12.5% instructions in that order).
     Before,
 }
 
@@ -768,8 +770,8 @@ impl Program {
     }
 
     /// The mode of the operand of node `n` at position `next - 1` when `n` is
-    /// evaluated in `mode`. A subtrahend is needed up to a little past its first
-    /// entry ([`Mode::Before`]). An intersection's first operand needs all its spans:
+    /// evaluated in `mode`. A subtrahend is needed only up to its first entry
+    /// ([`Mode::Before`]). An intersection's first operand needs all its spans:
     /// cut short at its first entry it would leave the others nothing to meet and
     /// the whole query would be redone; the later operands are evaluated from the
     /// first one's entry on (one that covers it has no real entry there and is

@@ -206,11 +206,9 @@ impl RenderScene {
         // An exit (the ray starts inside) close to where the result stops being
         // exact is not sure (see `Program::eval`; found by a packet-against-
         // single-ray fuzz: a union's exit at its first operand's end while the
-        // second went on). An entry there cannot be: a span starting at the
-        // limit has no length.
-        // Nor is an entry whose span was cut where the result stops being
-        // exact after at most 2 eps: a confirmed entry keeps 4 eps, so this
-        // span comes from operands asked on a range cut there, and such cuts
+        // second went on). Nor is an entry whose span was cut at that limit
+        // after at most 2 eps: a confirmed entry keeps 4 eps, so this span
+        // comes from operands asked on a range cut there, and such cuts
         // leave spans shorter than eps that regularisation drops in one
         // operand and not in another (a cone minus a near twin of itself,
         // asked on 1e-5 of the ray, kept its entry where the full diagram
