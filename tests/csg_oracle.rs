@@ -356,20 +356,9 @@ fn short_first_operand_span() {
     // diagram merged it with the torus's span further on and dropped it
     // (short spans go), so its first surface was the torus 0.47 further. A
     // nearest-mode union now confirms no first span shorter than eps.
-    let text = r#"{"camera": {"eye": [0, 0, 6], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40},
-      "objects": [{"name": "o0", "shape": {"transformed": {"translate": [0.1180156967896604, 0.2641243240929097, 0.23369156044707534],
-        "rotate_deg": [-11.477654658303067, 84.72017068233015, -106.53501602178694], "scale": [0.49690345276979453, 0.5297953485632014, 0.9083143999046742],
-        "shape": {"union": [
-          {"transformed": {"translate": [-0.04499939663409236, -0.17080785570543, -0.22178182962687287],
-            "rotate_deg": [-68.2490279080483, -28.195717869723552, 72.58223901132749], "scale": [1.4959293813028807, 0.9448904957534981, 0.6106761459385521],
-            "shape": {"transformed": {"matrix": [0.4112692961444526, -0.8196984205391287, 0.23391842968947296, 0.0038794358106269966,
-              0.24469361185533112, 2.0837160915378083, 0.41525940620507695, 0.2911698061917887,
-              -0.6766377228539686, -0.6535287458300627, 1.4040057861236666, 0.14949276527912103, 0, 0, 0, 1],
-              "shape": {"box": {"min": [-0.5632247329576284, -0.40735964683482817, 0.6080867197210071], "max": [-0.2786194646083844, 0.7915957473730122, 1.5685395408959657]}}}}}},
-          {"torus": {"center": [0.3297684758253786, 0.393470751706395, 0.16593692639449598], "axis": [-0.9512291028515172, -0.9013570490872185, 0.1597020480497009],
-            "major": 0.8802645485466964, "minor": 0.3498344250717844}}]}}}}]}"#;
-    let sf = rothray::io::parse_scene_with(text, std::path::Path::new("test.json"), &Default::default()).expect("scene parses");
-    let scene = RenderScene::from_world(&sf.world).expect("scene bakes");
+    let scene = bake_shape_json(
+        r#"{"transformed":{"translate":[0.1180156967896604,0.2641243240929097,0.23369156044707534],"rotate_deg":[-11.477654658303067,84.72017068233015,-106.53501602178694],"scale":[0.49690345276979453,0.5297953485632014,0.9083143999046742],"shape":{"union":[{"transformed":{"translate":[-0.04499939663409236,-0.17080785570543,-0.22178182962687287],"rotate_deg":[-68.2490279080483,-28.195717869723552,72.58223901132749],"scale":[1.4959293813028807,0.9448904957534981,0.6106761459385521],"shape":{"transformed":{"matrix":[0.4112692961444526,-0.8196984205391287,0.23391842968947296,0.0038794358106269966,0.24469361185533112,2.0837160915378083,0.41525940620507695,0.2911698061917887,-0.6766377228539686,-0.6535287458300627,1.4040057861236666,0.14949276527912103,0,0,0,1],"shape":{"box":{"min":[-0.5632247329576284,-0.40735964683482817,0.6080867197210071],"max":[-0.2786194646083844,0.7915957473730122,1.5685395408959657]}}}}}},{"torus":{"center":[0.3297684758253786,0.393470751706395,0.16593692639449598],"axis":[-0.9512291028515172,-0.9013570490872185,0.1597020480497009],"major":0.8802645485466964,"minor":0.3498344250717844}}]}}}"#,
+    );
     let ray =
         rothray::engine::Ray::new(glam::Vec3::new(-0.36582097, -1.4847515, 5.9353414), glam::Vec3::new(0.17979792, 0.3308626, -0.9913008));
     nearest_is_first_surface(&scene, &ray, &|| "the reproducer".into());
@@ -475,12 +464,7 @@ fn two_cubes_obj(name: &str) -> std::path::PathBuf {
 fn nearest_vs_diagram_on(shapes: &[String], rays: &dyn Fn(usize) -> rothray::engine::Ray, n: usize) -> Vec<String> {
     let mut bad = Vec::new();
     for (i, sh) in shapes.iter().enumerate() {
-        let text = format!(
-            r#"{{"camera": {{"eye": [0, 0, 6], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40}}, "objects": [{{"name": "o", "shape": {sh}}}]}}"#
-        );
-        let opts = rothray::io::LoadOptions { allow_paths: vec![std::env::temp_dir()] };
-        let sf = rothray::io::parse_scene_with(&text, std::path::Path::new("test.json"), &opts).expect("scene parses");
-        let scene = RenderScene::from_world(&sf.world).expect("scene bakes");
+        let scene = bake_shape_json(sh);
         for j in 0..n {
             let ray = rays(j);
             let (one, want) = (scene.intersect(&ray).map(|h| h.t), nearest_in_diagrams(&scene, &ray, 1));
@@ -606,11 +590,7 @@ fn near_twin_slivers_from_inside() {
     // 0.0298; the full diagram has nothing (and point classification cannot
     // tell at this size). Not yet understood.
     let shape = r#"{"difference":[{"transformed":{"translate":[1.4786156310588637e-05,-2.748444627796021e-06,-2.4295940701135698e-05],"shape":{"difference":[{"sphere":{"center":[-0.13262931649337095,0.30432019708824365,0.18940563698396296],"radius":0.9886724441341528}},{"transformed":{"translate":[1.0552175103705918e-05,-1.0670604095630437e-05,-1.7949908196547406e-05],"shape":{"transformed":{"translate":[0.0925900248395396,-0.15690054906013207,0.012337675856428088],"rotate_deg":[139.35390960527167,19.959414251206596,166.5909797406921],"scale":[1.0277918084510544,0.5117260691586586,0.545987601712118],"shape":{"torus":{"center":[0.3943646762278983,0.17839996412504533,0.03850505129189036],"axis":[0.5497843849401289,-0.9172632860831691,-0.14681148282574163],"major":0.5097308543197512,"minor":0.42891638486794287}}}}}}]}}},{"difference":[{"sphere":{"center":[-0.13262931649337095,0.30432019708824365,0.18940563698396296],"radius":0.9886724441341528}},{"transformed":{"translate":[1.0552175103705918e-05,-1.0670604095630437e-05,-1.7949908196547406e-05],"shape":{"transformed":{"translate":[0.0925900248395396,-0.15690054906013207,0.012337675856428088],"rotate_deg":[139.35390960527167,19.959414251206596,166.5909797406921],"scale":[1.0277918084510544,0.5117260691586586,0.545987601712118],"shape":{"torus":{"center":[0.3943646762278983,0.17839996412504533,0.03850505129189036],"axis":[0.5497843849401289,-0.9172632860831691,-0.14681148282574163],"major":0.5097308543197512,"minor":0.42891638486794287}}}}}},{"transformed":{"translate":[0.0925900248395396,-0.15690054906013207,0.012337675856428088],"rotate_deg":[139.35390960527167,19.959414251206596,166.5909797406921],"scale":[1.0277918084510544,0.5117260691586586,0.545987601712118],"shape":{"torus":{"center":[0.3943646762278983,0.17839996412504533,0.03850505129189036],"axis":[0.5497843849401289,-0.9172632860831691,-0.14681148282574163],"major":0.5097308543197512,"minor":0.42891638486794287}}}}]}]}"#;
-    let text = format!(
-        r#"{{"camera": {{"eye": [0, 0, 6], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40}}, "objects": [{{"name": "o", "shape": {shape}}}]}}"#
-    );
-    let sf = rothray::io::parse_scene_with(&text, std::path::Path::new("test.json"), &Default::default()).expect("scene parses");
-    let scene = RenderScene::from_world(&sf.world).expect("scene bakes");
+    let scene = bake_shape_json(shape);
     let ray = rothray::engine::Ray::new(
         glam::Vec3::new(0.006999917, -0.093656145, 0.41363698),
         glam::Vec3::new(1.2009127, -0.7221188, -1.9700159),

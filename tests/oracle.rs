@@ -347,10 +347,22 @@ pub fn scene_json(objects: &[Shape]) -> String {
 }
 
 pub fn bake(objects: &[Shape]) -> RenderScene {
+    bake_text(&scene_json(objects))
+}
+
+/// A scene of one object whose shape is the JSON `shape` (as the scene
+/// format writes it), baked.
+pub fn bake_shape_json(shape: &str) -> RenderScene {
+    bake_text(&format!(
+        "{{\"camera\":{{\"eye\":[0,0,6],\"target\":[0,0,0],\"up\":[0,1,0],\"fov_y_deg\":40}},\"objects\":[{{\"name\":\"o0\",\"shape\":{shape}}}]}}"
+    ))
+}
+
+fn bake_text(text: &str) -> RenderScene {
     // The random meshes are written to the temporary folder, outside the
     // (nominal) scene's folder: allow it, as a user would with --allow-path.
     let opts = rothray::io::LoadOptions { allow_paths: vec![std::env::temp_dir()] };
-    let sf = rothray::io::parse_scene_with(&scene_json(objects), std::path::Path::new("test.json"), &opts).expect("scene parses");
+    let sf = rothray::io::parse_scene_with(text, std::path::Path::new("test.json"), &opts).expect("scene parses");
     RenderScene::from_world(&sf.world).expect("scene bakes")
 }
 
