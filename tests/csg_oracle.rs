@@ -597,3 +597,84 @@ fn near_twin_slivers_from_inside() {
     );
     nearest_is_first_surface(&scene, &ray, &|| "the reproducer".into());
 }
+
+/// A random tree of the leaves with packet kernels (no torus), half of them
+/// transformed, `depth` levels at most.
+fn kernel_tree(rng: &mut SmallRng, depth: u32) -> Shape {
+    use rand::Rng;
+    if depth == 0 || rng.gen_bool(0.2) {
+        let l = loop {
+            let planes = rng.gen_bool(0.15);
+            let l = random_leaf(rng, planes);
+            if !matches!(l, Shape::Torus { .. }) {
+                break l;
+            }
+        };
+        return if rng.gen_bool(0.5) { random_xf(rng, l) } else { l };
+    }
+    let c: Vec<Shape> = (0..rng.gen_range(2..4)).map(|_| kernel_tree(rng, depth - 1)).collect();
+    match rng.gen_range(0..3) {
+        0 => Shape::Union(c),
+        1 => Shape::Inter(c),
+        _ => Shape::Diff(c),
+    }
+}
+
+#[test]
+fn small_trees_match_the_frame_path() {
+    // Small trees (narrow nodes over analytic leaves, `Program::small_eval`)
+    // against the evaluator's frames (the scene baked again with the pass
+    // off): the same full diagrams bit for bit, and each nearest hit, single
+    // or in a packet, is the first surface of the frame path's diagrams.
+    // Trees of kernel leaves only, and general trees (tori, meshes, deeper)
+    // whose subtrees may be small.
+    use rand::Rng;
+    let seed = 0x5a11u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let (mut rays, mut roots) = (0, 0);
+    for case in 0..300 {
+        let trees: Vec<Shape> = (0..rng.gen_range(1..3))
+            .map(|_| if case % 3 == 2 { random_tree_with(&mut rng, 4, true) } else { kernel_tree(&mut rng, 4) })
+            .collect();
+        let scene = bake(&trees);
+        let mut frames = bake(&trees);
+        remove_mesh_files(&trees);
+        frames.without_small_trees();
+        roots += scene.small_tree_roots();
+        assert_eq!(frames.small_tree_roots(), 0);
+        let mut ps = rothray::engine::PacketScratch::default();
+        for p in 0..25 {
+            let (o, d) = random_ray(&mut rng);
+            let packet = packet_around(o, d, if p % 4 == 0 { 0.05 } else { 0.003 });
+            let mut out = [None; 8];
+            scene.intersect_packet(&packet, &mut ps, &mut out);
+            for (k, ray) in packet.iter().enumerate() {
+                let ctx = || {
+                    format!(
+                        "seed {seed:#x} case {case} packet {p} ray {k}: {ray:?} trees {:?}",
+                        trees.iter().map(|t| t.json()).collect::<Vec<_>>()
+                    )
+                };
+                for oi in 0..trees.len() as u32 {
+                    assert_eq!(scene.spans(ray, oi), frames.spans(ray, oi), "full diagram, object {oi}, {}", ctx());
+                }
+                let one = scene.intersect(ray);
+                assert_eq!(hit_key(out[k]), hit_key(one), "packet vs single ray, {}", ctx());
+                let firsts: Vec<(f32, u32, u32, u32)> = (0..trees.len() as u32)
+                    .filter_map(|oi| rothray::csg::first_surface(&frames.spans(ray, oi)).map(|(t, s)| (t, oi, s.leaf_index(), s.sub)))
+                    .collect();
+                let want = firsts.iter().copied().min_by(|a, b| a.0.total_cmp(&b.0));
+                assert_eq!(one.map(|h| h.t), want.map(|w| w.0), "nearest vs the frame path's diagram, {}", ctx());
+                if let (Some(h), Some(w)) = (one, want) {
+                    if firsts.iter().filter(|f| f.0 == w.0).count() == 1 {
+                        assert_eq!((h.object, h.leaf, h.sub), (w.1, w.2, w.3), "surface, {}", ctx());
+                    }
+                }
+                rays += 1;
+            }
+        }
+    }
+    println!("{rays} rays, {roots} small-tree roots");
+    assert!(rays == 60_000 && roots > 200, "{roots} small-tree roots");
+}

@@ -59,6 +59,7 @@ impl Follower {
         p.wide.truncate(n);
         p.bounds.truncate(n);
         p.leafy.truncate(n);
+        p.small.truncate(n);
         p.children.truncate(self.children);
         p.local_len = 0;
         p.lists_len = 0;
@@ -82,6 +83,7 @@ fn copy_rows(copy: &mut Program, base: &Program, e: &Edit) {
     put(&mut copy.wide, &base.wide, e.nodes);
     put(&mut copy.bounds, &base.bounds, e.nodes);
     put(&mut copy.leafy, &base.leafy, e.nodes);
+    put(&mut copy.small, &base.small, e.nodes);
     put(&mut copy.children, &base.children, e.children);
     put(&mut copy.wides, &base.wides, e.wides);
 }
@@ -99,6 +101,7 @@ fn append_rows(copy: &mut Program, base: &Program) {
     tail(&mut copy.wide, &base.wide);
     tail(&mut copy.bounds, &base.bounds);
     tail(&mut copy.leafy, &base.leafy);
+    tail(&mut copy.small, &base.small);
     tail(&mut copy.children, &base.children);
     tail(&mut copy.wides, &base.wides);
 }
@@ -114,6 +117,7 @@ fn copy_all(copy: &mut Program, base: &Program) {
         wide,
         bounds,
         leafy,
+        small,
         children,
         wides,
         local_wides: _,
@@ -130,6 +134,7 @@ fn copy_all(copy: &mut Program, base: &Program) {
     copy.wide.clone_from(wide);
     copy.bounds.clone_from(bounds);
     copy.leafy.clone_from(leafy);
+    copy.small.clone_from(small);
     copy.children.clone_from(children);
     copy.wides.clone_from(wides);
     copy.local_len = 0;

@@ -76,6 +76,10 @@ pub struct Program {
     pub bounds: Vec<Aabb>,
     /// Every child is a leaf (evaluated in one loop, without frames).
     pub leafy: Vec<bool>,
+    /// Per node, as [`small_tree::small_of`] makes it: nonzero for a leaf
+    /// with a packet kernel and for the root of a small tree, which is
+    /// evaluated whole ([`Program::small_eval`]).
+    pub small: Vec<u8>,
     /// Child node ids of the inner nodes.
     pub children: Vec<u32>,
     /// BVHs of wide nodes, each shared with the per-tile copies of the
@@ -447,6 +451,8 @@ pub struct Scratch {
     pub queue: rothray_primitives::bvh::NearestQueue,
     /// The entries of a tile's list that a ray meets ([`TileList::for_rays`]).
     met: Vec<u32>,
+    /// Accumulators of a small tree's pass, one per depth.
+    small: Vec<SpanList>,
 }
 
 /// Builds a [`Program`] bottom-up.
@@ -478,6 +484,7 @@ impl<'a> ProgramBuilder<'a> {
         p.wide.push(u32::MAX);
         p.bounds.push(bounds);
         p.leafy.push(false);
+        p.small.push(self.leaves.has_kernel8(leaf) as u8);
         id
     }
 
@@ -550,6 +557,8 @@ impl<'a> ProgramBuilder<'a> {
         p.bounds.push(bounds);
         let leafy = flat.iter().all(|&c| p.kind[c as usize] == NodeKind::Leaf);
         p.leafy.push(leafy);
+        let small = small_tree::small_of(kind, wide != u32::MAX, flat.iter().map(|&c| p.small[c as usize]));
+        p.small.push(small);
         id
     }
 
@@ -712,6 +721,11 @@ impl Program {
             let Scratch { out, leaf, tmp, cand, .. } = scratch;
             return self.eval_frameless(r, ask, (tmin, tmax), Lists { leaf, tmp, acc: out, cand }).min(tmax);
         }
+        if self.small_root(r) {
+            let Scratch { out, leaf, tmp, small, .. } = scratch;
+            self.small_eval(r, ask, (tmin, tmax), SmallLists { out, deeper: small, leaf, tmp });
+            return tmax;
+        }
         let base = scratch.frames.len();
         // (The root's box was tested just above, on the same range.)
         self.push_frame(root, (tmin, tmax), ctx, (mode, true), scratch);
@@ -731,16 +745,21 @@ impl Program {
                         // `v` in nearest mode).
                         let v = leaf_spans(leaves, ctx, self.first[c as usize], (ct0, ct1), ctx.nearest(mode), leaf);
                         self.absorb(&mut frames[top], &mut accs[top], tmp, (leaf.as_slice(), v), ctx.eps);
-                    } else if self.frameless(c as usize) {
-                        // Bottom-level inner node: evaluate in place, no frame.
+                    } else if self.frameless(c as usize) || self.small_root(c as usize) {
+                        // Bottom-level inner node or small tree: evaluate in place, no frame.
                         let cu = c as usize;
-                        let Scratch { frames, accs, tmp, leaf, sub, cand, .. } = scratch;
+                        let Scratch { frames, accs, tmp, leaf, sub, cand, small, .. } = scratch;
                         sub.clear();
                         let valid = if !tested && self.bounds[cu].ray_range(ctx.ray.origin, ctx.ray.inv_dir, ct0, ct1).is_none() {
                             f32::INFINITY
-                        } else {
+                        } else if self.frameless(cu) {
                             let ask = Ask { leaves, ctx, mode };
                             self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub, cand })
+                        } else {
+                            let ask = Ask { leaves, ctx, mode: Mode::All };
+                            let lists = SmallLists { out: &mut *sub, deeper: small, leaf: &mut *leaf, tmp: &mut *tmp };
+                            self.small_eval(cu, ask, (ct0, ct1), lists);
+                            f32::INFINITY
                         };
                         self.absorb(&mut frames[top], &mut accs[top], tmp, (sub.as_slice(), valid), ctx.eps);
                     } else {
@@ -1298,6 +1317,9 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
 
 #[path = "leaf_packet.rs"]
 mod leaf_packet;
+#[path = "small_tree.rs"]
+pub(crate) mod small_tree;
+use small_tree::SmallLists;
 #[path = "union_first.rs"]
 mod union_first;
 #[path = "union_packet.rs"]

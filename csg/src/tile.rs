@@ -392,6 +392,7 @@ impl Spec<'_> {
         p.wide.push(wide);
         p.bounds.push(p.bounds[positive as usize]);
         p.leafy.push(false);
+        p.small.push(0);
         tp.counts.nodes_written += 1;
         id
     }
@@ -416,6 +417,8 @@ impl Spec<'_> {
         p.wide.push(u32::MAX);
         p.bounds.push(bounds);
         p.leafy.push(leafy);
+        let small = crate::program::small_tree::small_of(kind, false, kids.iter().map(|&c| p.small[c as usize]));
+        p.small.push(small);
         tp.counts.nodes_written += 1;
         id
     }

@@ -432,6 +432,7 @@ fn copy_nodes(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
         put(&mut dst.wide, b, wide);
         put(&mut dst.bounds, b, src.bounds[a]);
         put(&mut dst.leafy, b, src.leafy[a]);
+        put(&mut dst.small, b, src.small[a]);
     }
     for i in 0..len(s.children) as usize {
         let c = shift(src.children[s.children[0] as usize + i], s.nodes, at.nodes);

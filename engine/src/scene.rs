@@ -140,6 +140,21 @@ impl RenderScene {
         self.ray_by_ray = on;
     }
 
+    /// Turns off the whole pass of small trees (`Program::small_eval`):
+    /// every tree goes through the evaluator's frames, in the caller's
+    /// mode. For tests (the frame path is their oracle) and measurements;
+    /// a live sync bakes changed rows with the pass on again.
+    #[doc(hidden)]
+    pub fn without_small_trees(&mut self) {
+        self.program.small.fill(0);
+    }
+
+    /// How many nodes of the baked program are small trees' roots (for tests).
+    #[doc(hidden)]
+    pub fn small_tree_roots(&self) -> usize {
+        (0..self.program.kind.len()).filter(|&n| self.program.small_root(n)).count()
+    }
+
     /// The world bounds of the leaves `leaves` (rows of the leaf table),
     /// read from their program nodes: the bake keeps the leaves' bounds
     /// there only.
