@@ -16,6 +16,7 @@
 //! finishes its own query from its prep ([`PacketMemo::torus_lane`]).
 
 use rothray_primitives::{
+    box_wide::BoxTest8,
     glam::Vec3,
     kernels::TorusPrep,
     kernels8::{Ranges8, Rays8Soa},
@@ -64,7 +65,13 @@ struct ListMet {
     /// Whether every lane's ray is a ray of the list's plane.
     ok: bool,
     met: Vec<u32>,
+    /// Per entry of `met`, where each lane's line enters and leaves its box
+    /// ([`BoxTest8::slabs`]), when the rays form a packet; else empty.
+    slabs: Vec<Slabs8>,
 }
+
+/// Eight lanes' entries and exits of one box ([`BoxTest8::slabs`]).
+pub(crate) type Slabs8 = ([f32; 8], [f32; 8]);
 
 impl LeafRecords {
     pub(crate) fn clear(&mut self) {
@@ -154,14 +161,16 @@ impl PacketMemo {
     /// `plane` ([`TileList::met_by`], made when the first lane asks), for
     /// lane `k`; `None` when the packet does not answer (no rays set, the
     /// lane is not in the packet, or a ray is not a ray of the plane). A
-    /// superset of the entries lane `k`'s own point meets.
+    /// superset of the entries lane `k`'s own point meets. With them, the
+    /// lanes' entries and exits of each one's box (one 8-lane test per box
+    /// instead of one test per lane), when the rays form a packet.
     #[inline]
     pub(crate) fn with_list_met<R>(
         &self,
         key: (usize, u32),
         (list, plane): (&TileList, &RayPlane),
         k: usize,
-        f: impl FnOnce(&TileList, &[u32]) -> R,
+        f: impl FnOnce(&TileList, &[u32], &[Slabs8]) -> R,
     ) -> Option<R> {
         let mut guard = self.leaf_solves.borrow_mut();
         let LeafRecords { lanes, generation, o, d, list_met, .. } = &mut *guard;
@@ -171,8 +180,9 @@ impl PacketMemo {
         if list_met.key != key || list_met.generation != *generation {
             list_met.ok = list.met_by(plane, (o, d), *lanes, &mut list_met.met);
             (list_met.key, list_met.generation) = (key, *generation);
+            met_slabs(list, list_met, (o, d));
         }
-        list_met.ok.then(|| f(list, &list_met.met))
+        list_met.ok.then(|| f(list, &list_met.met, &list_met.slabs))
     }
 
     /// `f` of the packet's solve of analytic leaf `i` (which must have a
@@ -186,6 +196,20 @@ impl PacketMemo {
             return None;
         }
         Some(f(record(slots, i, *generation, |e| solve8(leaves, i, rays, *lanes, e))))
+    }
+}
+
+/// The 8-lane box tests of the entries `rec.met` of `list` into `rec.slabs`
+/// (left empty when the rays `(o, d)` do not form a packet). Out of line:
+/// once per packet and list.
+#[inline(never)]
+fn met_slabs(list: &TileList, rec: &mut ListMet, (o, d): (&[Vec3; 8], &[Vec3; 8])) {
+    rec.slabs.clear();
+    if !rec.ok {
+        return;
+    }
+    if let Some(test) = BoxTest8::new(o, d) {
+        rec.slabs.extend(rec.met.iter().map(|&i| test.slabs(list.entry(i).1)));
     }
 }
 

@@ -1083,9 +1083,19 @@ impl Program {
         // all lanes (each lane then tests their boxes: the same candidates).
         let key = (self as *const Program as usize, n as u32);
         let packet = ctx.memo.and_then(|(memo, k)| {
-            memo.with_list_met(key, listed, k, |list, met| {
-                for &i in met {
-                    push(cand, list.entry(i));
+            memo.with_list_met(key, listed, k, |list, met, slabs| {
+                if slabs.len() == met.len() {
+                    // The packet's box tests, clipped to this lane's range.
+                    for (&i, (enter, leave)) in met.iter().zip(slabs) {
+                        if let Some((t0, _)) = Aabb::clip_slabs((enter[k], leave[k]), tmin, tmax) {
+                            cand.push((list.entry(i).0, t0));
+                            counts::wide_child();
+                        }
+                    }
+                } else {
+                    for &i in met {
+                        push(cand, list.entry(i));
+                    }
                 }
             })
         });

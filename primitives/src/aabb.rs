@@ -128,6 +128,19 @@ impl Aabb {
         }
         out
     }
+    /// [`Aabb::ray_range`] from the line's entry and exit of the box
+    /// (`(t0, t1)` as [`crate::box_wide::BoxTest8::slabs`] gives them), on
+    /// `[tmin, tmax]`: the same operations in the same order, so the same bits.
+    #[inline(always)]
+    pub fn clip_slabs((t0, t1): (f32, f32), tmin: f32, tmax: f32) -> Option<(f32, f32)> {
+        let (t0, t1) = (max_ps(t0, tmin), min_ps(t1, tmax));
+        if t0 <= t1 {
+            Some((t0, t1))
+        } else {
+            None
+        }
+    }
+
     /// The parametric range `[t0, t1]` of the ray inside the box, clipped to
     /// `[tmin, tmax]`; `None` when it misses. `inv_d` is `1 / d` per component.
     #[inline(always)]
