@@ -723,7 +723,7 @@ impl Program {
         }
         if self.small_root(r) {
             let Scratch { out, leaf, tmp, small, .. } = scratch;
-            self.small_eval(r, ask, (tmin, tmax), SmallLists { out, deeper: small, leaf, tmp });
+            self.small_eval(r, Ask { mode: Mode::All, ..ask }, (tmin, tmax), SmallLists { out, deeper: small, leaf, tmp });
             return tmax;
         }
         let base = scratch.frames.len();

@@ -25,7 +25,9 @@
 //! `small_trees_are_their_full_diagrams` in this crate's tests compares
 //! them.
 
-use super::{counts, leaf_spans, Ask, NodeKind, Program};
+use rothray_primitives::LeafTable;
+
+use super::{counts, Ask, NodeKind, Program, RayCtx};
 use crate::spans::{combine_into, Op, SpanList};
 
 /// At most this many leaves in a small tree: a nearest evaluation of a
@@ -124,10 +126,10 @@ impl Program {
             if self.kind[c] == NodeKind::Leaf {
                 if direct {
                     acc.clear();
-                    leaf_spans(leaves, ctx, self.first[c], (lo, hi), None, acc);
+                    kernel_leaf(leaves, ctx, self.first[c], (lo, hi), acc);
                 } else {
                     leaf.clear();
-                    leaf_spans(leaves, ctx, self.first[c], (lo, hi), None, leaf);
+                    kernel_leaf(leaves, ctx, self.first[c], (lo, hi), leaf);
                     join(op, acc, leaf, ctx.eps, tmp);
                 }
             } else {
@@ -151,6 +153,22 @@ impl Program {
             }
         }
     }
+}
+
+/// Leaf `i`'s spans on `(lo, hi)` into `out`, for a leaf with a packet
+/// kernel (every leaf of a small tree): what `leaf_spans` gives it in full
+/// mode (from the packet's solve when the ray has one, else its own query;
+/// exact everywhere), without the branches for the other kinds.
+#[inline(always)]
+fn kernel_leaf(leaves: &LeafTable, ctx: &RayCtx, i: u32, (lo, hi): (f32, f32), out: &mut SpanList) {
+    debug_assert!(leaves.has_kernel8(i) && out.is_empty());
+    counts::leaf();
+    if let Some((memo, k)) = ctx.memo {
+        if memo.leaf_lane(leaves, i, k, (lo, hi), out).is_some() {
+            return;
+        }
+    }
+    leaves.spans_for(i, &ctx.ray, (lo, hi), None, out);
 }
 
 /// `acc = acc op r` for a later operand `r`: an empty one leaves a union or
