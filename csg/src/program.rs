@@ -357,9 +357,9 @@ pub(crate) type ListsRef<'a> = (&'a mut SpanList, &'a mut SpanList, &'a mut Span
 
 /// Candidate `(pos, t0)` of a wide union as one integer whose order is the
 /// candidates' canonical order: the entry (as `total_cmp` orders it), then
-/// the position.
+/// the position (also the engine's order of a tile's objects along a ray).
 #[inline(always)]
-pub(crate) fn cand_key(pos: u32, t0: f32) -> u64 {
+pub fn cand_key(pos: u32, t0: f32) -> u64 {
     let b = t0.to_bits();
     (((b ^ (((b as i32) >> 31) as u32 | 0x8000_0000)) as u64) << 32) | pos as u64
 }

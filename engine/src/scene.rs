@@ -132,10 +132,7 @@ thread_local! {
 #[inline(always)]
 fn visit_in_order(cands: &mut [(f32, u32)], mut limit: f32, scratch: &mut Scratch, f: &mut impl FnMut(u32, &mut Scratch) -> f32) {
     // Entry as `total_cmp` orders it, then object: one integer compare.
-    let key = |c: &(f32, u32)| {
-        let b = c.0.to_bits();
-        (((b ^ (((b as i32) >> 31) as u32 | 0x8000_0000)) as u64) << 32) | c.1 as u64
-    };
+    let key = |c: &(f32, u32)| rothray_csg::program::cand_key(c.1, c.0);
     // Few: sorted whole, in fewer steps than the scans take.
     let sorted = cands.len() <= 8;
     if sorted && cands.len() > 1 {

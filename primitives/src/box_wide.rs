@@ -88,9 +88,7 @@ impl BoxTest8 {
     pub fn ray_range(&self, b: &Aabb, tmin: &[f32; 8], tmax: &[f32; 8]) -> (u32, [f32; 8]) {
         Lanes8 { p: &self.0 }.ray_range(b, tmin, tmax)
     }
-}
 
-impl BoxTest8 {
     /// Per lane, where the line enters and leaves box `b` before any range
     /// clips it: [`Aabb::clip_slabs`] of these on lane k's `[tmin, tmax]`
     /// is what [`Aabb::ray_range`] gives lane k's ray there, bit for bit

@@ -628,46 +628,50 @@ impl Packet8 {
         })
     }
 
+    /// Where the lines of lanes `4h..4h+4` enter and leave box `b` before any
+    /// range clips them (the near plane per axis is the one `min` picks in
+    /// [`Aabb::ray_range`](crate::Aabb::ray_range)): the part of the box
+    /// test that [`Packet8::box_range`] and [`Packet8::box_slabs`] share.
+    #[inline(always)]
+    fn half_slabs(&self, (bmin, bmax): ([f32; 3], [f32; 3]), h: usize) -> (Vec4, Vec4) {
+        let mut lo = [Vec4::ZERO; 3];
+        let mut hi = [Vec4::ZERO; 3];
+        for a in 0..3 {
+            let (near, far) = if self.near[a] == 0 { (bmin[a], bmax[a]) } else { (bmax[a], bmin[a]) };
+            lo[a] = (Vec4::splat(near) - self.o[a].half(h)) * self.inv[a].half(h);
+            hi[a] = (Vec4::splat(far) - self.o[a].half(h)) * self.inv[a].half(h);
+        }
+        (lo[0].max(lo[1]).max(lo[2]), hi[0].min(hi[1]).min(hi[2]))
+    }
+
     /// Per lane, where the line of that lane's ray enters and leaves box `b`
     /// before any range clips it: [`Packet8::box_range`] without `tlo` and
     /// `thi` (its `t0` and `t1` are these, then `max(tlo)` and `min(thi)`).
     #[inline(always)]
     pub(crate) fn box_slabs(&self, b: &crate::Aabb) -> (F8, F8) {
-        let (bmin, bmax) = (b.min.to_array(), b.max.to_array());
+        let planes = (b.min.to_array(), b.max.to_array());
         let (mut enter, mut leave) = (F8([0.0; 8]), F8([0.0; 8]));
         for h in 0..2 {
-            let mut lo = [Vec4::ZERO; 3];
-            let mut hi = [Vec4::ZERO; 3];
-            for a in 0..3 {
-                let (near, far) = if self.near[a] == 0 { (bmin[a], bmax[a]) } else { (bmax[a], bmin[a]) };
-                lo[a] = (Vec4::splat(near) - self.o[a].half(h)) * self.inv[a].half(h);
-                hi[a] = (Vec4::splat(far) - self.o[a].half(h)) * self.inv[a].half(h);
-            }
-            enter.0[4 * h..4 * h + 4].copy_from_slice(&lo[0].max(lo[1]).max(lo[2]).to_array());
-            leave.0[4 * h..4 * h + 4].copy_from_slice(&hi[0].min(hi[1]).min(hi[2]).to_array());
+            let (t0, t1) = self.half_slabs(planes, h);
+            enter.0[4 * h..4 * h + 4].copy_from_slice(&t0.to_array());
+            leave.0[4 * h..4 * h + 4].copy_from_slice(&t1.to_array());
         }
         (enter, leave)
     }
 
     /// Per lane, what [`Aabb::ray_range`](crate::Aabb::ray_range) gives that
     /// lane's ray on `[tlo, thi]` for box `b` (the same operations on the
-    /// same values: the near plane per axis is the one `min` picks there):
+    /// same values):
     /// bit k set where lane k meets the box, and the entries.
     #[inline(always)]
     pub(crate) fn box_range(&self, b: &crate::Aabb, tlo: &F8, thi: &F8) -> (u32, F8) {
-        let (bmin, bmax) = (b.min.to_array(), b.max.to_array());
+        let planes = (b.min.to_array(), b.max.to_array());
         let mut mask = 0u32;
         let mut entry = F8([0.0; 8]);
         for h in 0..2 {
-            let mut lo = [Vec4::ZERO; 3];
-            let mut hi = [Vec4::ZERO; 3];
-            for a in 0..3 {
-                let (near, far) = if self.near[a] == 0 { (bmin[a], bmax[a]) } else { (bmax[a], bmin[a]) };
-                lo[a] = (Vec4::splat(near) - self.o[a].half(h)) * self.inv[a].half(h);
-                hi[a] = (Vec4::splat(far) - self.o[a].half(h)) * self.inv[a].half(h);
-            }
-            let t0 = lo[0].max(lo[1]).max(lo[2]).max(tlo.half(h));
-            let t1 = hi[0].min(hi[1]).min(hi[2]).min(thi.half(h));
+            let (enter, leave) = self.half_slabs(planes, h);
+            let t0 = enter.max(tlo.half(h));
+            let t1 = leave.min(thi.half(h));
             mask |= t0.cmple(t1).bitmask() << (4 * h);
             entry.0[4 * h..4 * h + 4].copy_from_slice(&t0.to_array());
         }
