@@ -48,6 +48,7 @@ fn packets_and_ray_by_ray_render_the_same_pictures() {
     let root = env!("CARGO_MANIFEST_DIR");
     for (path, w, h) in [
         ("benches/scenes/forest.json", 240u32, 135u32),
+        ("benches/scenes/forest_cut.json", 240, 135),
         ("benches/scenes/capsules.json", 240, 135),
         ("benches/scenes/mesh_cut.json", 240, 135),
         ("benches/scenes/tori.json", 240, 135),

@@ -1,4 +1,5 @@
-//! The first entry of a wide union of convex analytic leaves for all lanes
+//! The first entry of a wide union of convex analytic leaves (or of small
+//! trees of them) for all lanes
 //! of a packet at once, without each lane's ordered visit of its children.
 //!
 //! A lane's own walk ([`Program::leaf_union`]) visits the children in the
@@ -20,6 +21,24 @@
 //! Why: on a forest of 10 000 small leaves the lanes' ordered visits (their
 //! candidate lists, merges and memo look-ups) were most of the trace's
 //! cycles while the leaves' solves were an eighth (perf, `LaneWalks::take`).
+//!
+//! A wide union of small trees ([`Program::is_meet_union`]: a forest of
+//! trees cut by half-spaces, of rounded or hollowed pieces) is walked the
+//! same way when its children are kernel leaves or intersections and
+//! differences of a few of them ([`Program::small_leafy`]). Such a
+//! child's spans come from its operands' 8-lane solves by the exact set
+//! operation where no two of their boundaries lie within `2 eps` of each
+//! other (then `combine` fuses, merges and drops nothing; see
+//! [`small_first`]); elsewhere only a lower bound of its start is known,
+//! which keeps a lane from settling when that child may come first. The
+//! argument above holds for children with several spans when the second
+//! smallest start counts each child's later spans too. The lane walk of
+//! such a union is the evaluator's frames (`Program::collect`, one frame
+//! per union and an evaluation per child), so a lane the walk does not
+//! settle evaluates the union itself. On benches/scenes/forest_cut
+//! (10 000 such trees) 98% of the union's lane evaluations were answered
+//! here (`rothray bench benches/scenes/forest_cut.json --no-shadows
+//! --json`: `union_first_entry_lanes` against `union_listed_collects`).
 
 use rothray_primitives::{
     box_wide::{Lanes8, Visit8},
@@ -27,7 +46,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Span, Surf,
 };
 
-use super::{PacketMemo, Program};
+use super::{NodeKind, PacketMemo, Program};
 use crate::counts;
 
 /// Past the first entry `a`, the other children's boxes entered beyond
@@ -78,8 +97,6 @@ pub(crate) struct FirstWalk<'a> {
     boxt: [f32; 8],
     /// The second smallest span start.
     second: [f32; 8],
-    /// A local solve when the packet's memo solves no leaves.
-    local: Ranges8,
     /// Children met and not solved yet, solved nearest first at each
     /// `settle` (a tile's list comes in no particular order: solved as
     /// listed, forest's camera rays solved 38% more leaves).
@@ -119,7 +136,6 @@ impl<'a> FirstWalk<'a> {
             s1: [Surf::NONE; 8],
             boxt: inf,
             second: inf,
-            local: Ranges8::default(),
             pending,
         }
     }
@@ -145,7 +161,8 @@ impl<'a> FirstWalk<'a> {
         }
         let (a, e) = (self.a[k], self.eps[k]);
         if a == f32::INFINITY {
-            return Some((None, f32::INFINITY));
+            // (A child not sure of its span may still have one.)
+            return (self.second[k] == f32::INFINITY).then_some((None, f32::INFINITY));
         }
         let v = (a + 4.0 * e).max(a.next_up());
         let settled = a + 4.0 * e >= a.next_up()
@@ -165,7 +182,9 @@ impl<'a> FirstWalk<'a> {
     /// boxes' entries are `tbox`.
     #[inline(always)]
     fn take(&mut self, leaf: u32, m: u32, r: &Ranges8, tbox: &[f32; 8]) {
-        let mut m = m;
+        // A lane that the solve left undone goes the walk's way.
+        self.live &= !(m & !r.done);
+        let mut m = m & r.done;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
@@ -187,17 +206,8 @@ impl<'a> FirstWalk<'a> {
                 self.live &= !(1 << k);
                 continue;
             }
-            if c0 < self.a[k] {
-                self.second[k] = self.a[k];
-                self.a[k] = c0;
-                self.b[k] = c1;
-                self.s0[k] = Surf::new(leaf, r.s0[k]);
-                self.s1[k] = if real1 { Surf::new(leaf, r.s1[k]) } else { Surf::NONE };
-                self.boxt[k] = tbox[k];
-                self.reach[k] = self.reach[k].min(c0 + PRUNE * self.eps[k]);
-            } else {
-                self.second[k] = self.second[k].min(c0);
-            }
+            let s1 = if real1 { Surf::new(leaf, r.s1[k]) } else { Surf::NONE };
+            self.put(k, (c0, c1), (Surf::new(leaf, r.s0[k]), s1), tbox[k]);
         }
     }
 }
@@ -248,23 +258,247 @@ impl FirstWalk<'_> {
             if m == 0 || self.abort {
                 continue;
             }
-            let c = self.prog.child_at(self.n, pos);
-            let leaf = self.prog.first[c as usize];
-            if !self.leaves.has_kernel8(leaf) {
-                self.abort = true;
-                break;
-            }
-            let (memo, leaves) = (self.memo, self.leaves);
-            let solved = memo.with_solve(leaves, leaf, |r| self.take(leaf, m, r, &tbox));
-            if solved.is_none() {
-                counts::leaf_solve();
-                let mut r = std::mem::take(&mut self.local);
-                leaves.ranges8(leaf, &self.soa, self.live, &mut r);
-                self.take(leaf, m, &r, &tbox);
-                self.local = r;
+            let c = self.prog.child_at(self.n, pos) as usize;
+            match self.prog.kind[c] {
+                NodeKind::Leaf => {
+                    let leaf = self.prog.first[c];
+                    if !self.leaves.has_kernel8(leaf) {
+                        self.stop();
+                        break;
+                    }
+                    let (memo, leaves) = (self.memo, self.leaves);
+                    let solved = memo.with_solve(leaves, leaf, |r| self.take(leaf, m, r, &tbox));
+                    if solved.is_none() {
+                        let r = self.solve_here(leaf);
+                        self.take(leaf, m, &r, &tbox);
+                    }
+                }
+                _ if self.prog.small_leafy(c) => self.take_small(c, m, &tbox),
+                _ => {
+                    self.stop();
+                    break;
+                }
             }
         }
         pending.clear();
         *self.pending = pending;
+    }
+
+    /// No lane is answered here (a child without a packet kernel): the
+    /// walk ends at once.
+    fn stop(&mut self) {
+        self.abort = true;
+        self.reach = [f32::NEG_INFINITY; 8];
+    }
+
+    /// Kernel leaf `leaf` solved here for the live lanes (the packet's memo
+    /// solves no leaves).
+    #[inline(never)]
+    fn solve_here(&mut self, leaf: u32) -> Ranges8 {
+        counts::leaf_solve();
+        let mut r = Ranges8::default();
+        self.leaves.ranges8(leaf, &self.soa, self.live, &mut r);
+        r
+    }
+
+    /// Takes child `c`, an intersection or difference of a few kernel
+    /// leaves ([`Program::small_leafy`]), for the lanes `m` whose box
+    /// entries are `tbox`, from its operands' solves ([`small_first`]).
+    #[inline(never)]
+    fn take_small(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
+        let prog = self.prog;
+        let (first, count) = (prog.first[c] as usize, prog.count[c] as usize);
+        let mut ops = SmallOps { kind: prog.kind[c], count, leaf: [0; SMALL_OPS], r: [Ranges8::default(); SMALL_OPS] };
+        let mut lanes = m;
+        for j in 0..count {
+            let leaf = prog.first[prog.children[first + j] as usize];
+            ops.leaf[j] = leaf;
+            let (memo, leaves) = (self.memo, self.leaves);
+            ops.r[j] = match memo.with_solve(leaves, leaf, |r| *r) {
+                Some(r) => r,
+                None => self.solve_here(leaf),
+            };
+            lanes &= ops.r[j].done;
+        }
+        // A lane that a solve left undone goes the walk's way.
+        self.live &= !(m & !lanes);
+        while lanes != 0 {
+            let k = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            counts::wide_child();
+            let (lo, hi) = (self.tmin[k], self.tmax[k]);
+            match small_first(&ops, k, (lo, self.eps[k])) {
+                SmallFirst::Empty => {}
+                SmallFirst::Inside => self.live &= !(1 << k),
+                SmallFirst::From(t) => {
+                    if t < lo {
+                        self.live &= !(1 << k);
+                    } else {
+                        self.second[k] = self.second[k].min(t);
+                    }
+                }
+                SmallFirst::Span { t: (t0, t1), s: (s0, s1), next } => {
+                    if t0 >= hi {
+                        continue;
+                    }
+                    let real1 = t1 <= hi && t1.is_finite();
+                    let c1 = if real1 { t1 } else { t1.min(hi) };
+                    self.put(k, (t0, c1), (s0, if real1 { s1 } else { Surf::NONE }), tbox[k]);
+                    self.second[k] = self.second[k].min(next);
+                }
+            }
+        }
+    }
+
+    /// Lane `k`'s child span `t = (start, end)` (clipped to the range, the
+    /// start a real entry), `s` its surfaces, `tbox` its box entry.
+    #[inline(always)]
+    fn put(&mut self, k: usize, (c0, c1): (f32, f32), (s0, s1): (Surf, Surf), tbox: f32) {
+        if c0 < self.a[k] {
+            // (`second` may hold a child's bound below `a`: see `take_small`.)
+            self.second[k] = self.second[k].min(self.a[k]);
+            self.a[k] = c0;
+            self.b[k] = c1;
+            self.s0[k] = s0;
+            self.s1[k] = s1;
+            self.boxt[k] = tbox;
+            self.reach[k] = self.reach[k].min(c0 + PRUNE * self.eps[k]);
+        } else {
+            self.second[k] = self.second[k].min(c0);
+        }
+    }
+}
+
+/// The most operands of a child that [`FirstWalk::take_small`] takes.
+pub(crate) const SMALL_OPS: usize = 4;
+
+/// The solves of a small child's operands (kernel leaves).
+struct SmallOps {
+    kind: NodeKind,
+    count: usize,
+    leaf: [u32; SMALL_OPS],
+    r: [Ranges8; SMALL_OPS],
+}
+
+/// What a small child's result on a lane's range is known to be.
+#[derive(Debug, PartialEq)]
+enum SmallFirst {
+    /// No span.
+    Empty,
+    /// The range may start inside it.
+    Inside,
+    /// Not known exactly: any span starts at this place or later.
+    From(f32),
+    /// Its first span (with a real entry, longer than `8 eps`) and where
+    /// its next span starts (infinity: none).
+    Span { t: (f32, f32), s: (Surf, Surf), next: f32 },
+}
+
+/// Lane `k`'s first span of a small child from its operands' spans on the
+/// range starting at `lo`, each operand one span at most (kernel leaves are
+/// convex).
+///
+/// Where every boundary of the operands from `lo - 2 eps` on lies more than
+/// `2 eps` from the next one and from `lo`, `combine` fuses, merges and
+/// drops nothing (its tolerances are eps), and the lane walk's `leaf_node`,
+/// which narrows each operand's range to the result so far, gives the exact
+/// set operation's spans: their boundaries are the operands', those of a
+/// subtrahend flipped. Its first span is taken when longer than `8 eps`
+/// (then a settled lane cuts it at `v`, whatever clips its exit).
+/// Otherwise each result boundary is one of the operands' boundaries or
+/// fused with one within eps, so no span starts before the first boundary
+/// past `lo - 2 eps` less eps.
+fn small_first(ops: &SmallOps, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
+    let subtract = ops.kind == NodeKind::Difference;
+    // Boundaries (place, operand, exit) past lo - 2 eps, and which operands
+    // the range starts inside.
+    let mut ev = [(0.0f32, 0usize, false); 2 * SMALL_OPS];
+    let mut n = 0;
+    let mut inside = [false; SMALL_OPS];
+    let near = lo - 2.0 * eps;
+    for j in 0..ops.count {
+        let r = &ops.r[j];
+        if r.hit & (1 << k) == 0 {
+            continue;
+        }
+        for (t, exit) in [(r.t0[k], false), (r.t1[k], true)] {
+            if t < near {
+                inside[j] = !exit;
+            } else {
+                ev[n] = (t, j, exit);
+                n += 1;
+            }
+        }
+    }
+    let ev = &mut ev[..n];
+    ev.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+    let member = |inside: &[bool; SMALL_OPS]| match subtract {
+        true => inside[0] && !inside[1..ops.count].iter().any(|&b| b),
+        false => inside[..ops.count].iter().all(|&b| b),
+    };
+    let mut sure = true;
+    let mut prev = lo;
+    for &(t, _, _) in ev.iter() {
+        if t == f32::INFINITY {
+            break; // (ends at infinity bound nothing the range keeps)
+        }
+        if !(t - prev > 2.0 * eps) {
+            sure = false;
+            break;
+        }
+        prev = t;
+    }
+    if member(&inside) {
+        return SmallFirst::Inside;
+    }
+    if !sure {
+        return match ev.first() {
+            Some(&(t, _, _)) => SmallFirst::From(t - eps),
+            None => SmallFirst::Empty,
+        };
+    }
+    let surf = |(_, j, exit): (f32, usize, bool)| {
+        let r = &ops.r[j];
+        let s = Surf::new(ops.leaf[j], if exit { r.s1[k] } else { r.s0[k] });
+        if subtract && j > 0 {
+            s.flip()
+        } else {
+            s
+        }
+    };
+    let mut span: Option<((f32, Surf), (f32, Surf))> = None;
+    let mut start = None;
+    let mut was = false;
+    for &e in ev.iter() {
+        inside[e.1] = !e.2;
+        let now = member(&inside);
+        if now == was {
+            continue;
+        }
+        was = now;
+        match (now, start, span) {
+            (true, None, None) => start = Some((e.0, surf(e))),
+            (false, Some(s0), None) => span = Some((s0, (e.0, surf(e)))),
+            (true, _, Some(((t0, s0), (t1, s1)))) => {
+                return first_span((t0, t1), (s0, s1), e.0, eps);
+            }
+            _ => {}
+        }
+    }
+    match (start, span) {
+        (_, Some(((t0, s0), (t1, s1)))) => first_span((t0, t1), (s0, s1), f32::INFINITY, eps),
+        // Open to the end (an exit at infinity left out above).
+        (Some((t0, s0)), None) => first_span((t0, f32::INFINITY), (s0, Surf::NONE), f32::INFINITY, eps),
+        _ => SmallFirst::Empty,
+    }
+}
+
+/// [`SmallFirst::Span`] when the span is longer than `8 eps`, else only
+/// its start.
+fn first_span((t0, t1): (f32, f32), s: (Surf, Surf), next: f32, eps: f32) -> SmallFirst {
+    if t1 - t0 > 8.0 * eps {
+        SmallFirst::Span { t: (t0, t1), s, next }
+    } else {
+        SmallFirst::From(t0)
     }
 }

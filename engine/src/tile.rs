@@ -160,7 +160,7 @@ impl RenderScene {
                 ts.boxes.push(&self.objects[oi as usize].bounds, oi);
             }
         }
-        ts.unions = ts.live.iter().any(|&oi| ts.tp.prog.is_packet_union(ts.root_of[oi as usize]));
+        ts.unions = ts.live.iter().any(|&oi| ts.tp.prog.walks_in_packets(ts.root_of[oi as usize]));
         let TileScratch { live, counts, .. } = ts;
         counts.tiles += 1;
         counts.objects_kept += live.len() as u64;
