@@ -431,7 +431,15 @@ fn small_first(ops: &SmallOps, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
         }
     }
     let ev = &mut ev[..n];
-    ev.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+    // (By hand: at most eight, and `sort_unstable_by` was a call per lane
+    // and child.)
+    for i in 1..ev.len() {
+        let mut j = i;
+        while j > 0 && ev[j - 1].0.total_cmp(&ev[j].0).is_gt() {
+            ev.swap(j - 1, j);
+            j -= 1;
+        }
+    }
     let member = |inside: &[bool; SMALL_OPS]| match subtract {
         true => inside[0] && !inside[1..ops.count].iter().any(|&b| b),
         false => inside[..ops.count].iter().all(|&b| b),
