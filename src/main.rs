@@ -578,6 +578,8 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "union_first_entry_lanes": st.eval.first_settled,
         "union_walked_lanes": st.eval.first_walked,
         "union_listed_collects": st.eval.listed_collects,
+        "object_packet_lanes": st.eval.object_settled,
+        "object_packet_left": st.eval.object_left,
     })
 }
 

@@ -17,6 +17,8 @@ thread_local! {
     static FIRST_SETTLED: Cell<u64> = const { Cell::new(0) };
     static FIRST_WALKED: Cell<u64> = const { Cell::new(0) };
     static LISTED: Cell<u64> = const { Cell::new(0) };
+    static OBJ_SETTLED: Cell<u64> = const { Cell::new(0) };
+    static OBJ_LEFT: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -53,6 +55,12 @@ pub struct EvalCounts {
     /// Wide-union queries whose candidates came from a tile's list instead
     /// of the union's tree (`Program::collect`).
     pub listed_collects: u64,
+    /// Lanes of packets of tiles of simple objects whose hit the packet
+    /// picked among the objects (`engine/src/packet_first.rs`).
+    pub object_settled: u64,
+    /// Lanes of those packets left to their own visit of the objects (an
+    /// object unsure on the lane, a near tie, a box entered past the hit).
+    pub object_left: u64,
 }
 
 impl EvalCounts {
@@ -69,6 +77,8 @@ impl EvalCounts {
         self.first_settled += o.first_settled;
         self.first_walked += o.first_walked;
         self.listed_collects += o.listed_collects;
+        self.object_settled += o.object_settled;
+        self.object_left += o.object_left;
     }
 }
 
@@ -129,6 +139,14 @@ pub(crate) fn listed_collect() {
     bump(&LISTED);
 }
 
+/// A packet's lanes settled among its tile's objects (`settled` of them)
+/// and left to their own visits (`left`).
+#[inline(always)]
+pub fn object_lanes(settled: u32, left: u32) {
+    OBJ_SETTLED.with(|x| x.set(x.get() + settled as u64));
+    OBJ_LEFT.with(|x| x.set(x.get() + left as u64));
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -143,5 +161,7 @@ pub fn take_eval_counts() -> EvalCounts {
         first_settled: FIRST_SETTLED.with(|c| c.replace(0)),
         first_walked: FIRST_WALKED.with(|c| c.replace(0)),
         listed_collects: LISTED.with(|c| c.replace(0)),
+        object_settled: OBJ_SETTLED.with(|c| c.replace(0)),
+        object_left: OBJ_LEFT.with(|c| c.replace(0)),
     }
 }

@@ -1350,6 +1350,8 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
 
 #[path = "leaf_packet.rs"]
 mod leaf_packet;
+#[path = "object_packet.rs"]
+pub mod object_packet;
 #[path = "small_tree.rs"]
 pub(crate) mod small_tree;
 use small_tree::SmallLists;

@@ -308,7 +308,7 @@ impl FirstWalk<'_> {
     fn take_small(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
         let prog = self.prog;
         let (first, count) = (prog.first[c] as usize, prog.count[c] as usize);
-        let mut ops = SmallOps { kind: prog.kind[c], count, leaf: [0; SMALL_OPS], r: [Ranges8::default(); SMALL_OPS] };
+        let mut ops = SmallOps::<SMALL_OPS> { kind: prog.kind[c], count, leaf: [0; SMALL_OPS], r: [Ranges8::default(); SMALL_OPS] };
         let mut lanes = m;
         for j in 0..count {
             let leaf = prog.first[prog.children[first + j] as usize];
@@ -327,7 +327,13 @@ impl FirstWalk<'_> {
             lanes &= lanes - 1;
             counts::wide_child();
             let (lo, hi) = (self.tmin[k], self.tmax[k]);
-            match small_first(&ops, k, (lo, self.eps[k])) {
+            let first = match small_first::<SMALL_OPS, { 2 * SMALL_OPS }>(&ops, k, (lo, self.eps[k])) {
+                // A span no longer than 8 eps: the lane's cut at `v` might
+                // not reach past its exit (see `small_first`).
+                SmallFirst::Span { t: (t0, t1), .. } if !(t1 - t0 > 8.0 * self.eps[k]) => SmallFirst::From(t0),
+                f => f,
+            };
+            match first {
                 SmallFirst::Empty => {}
                 SmallFirst::Inside => self.live &= !(1 << k),
                 SmallFirst::From(t) => {
@@ -372,49 +378,49 @@ impl FirstWalk<'_> {
 /// The most operands of a child that [`FirstWalk::take_small`] takes.
 pub(crate) const SMALL_OPS: usize = 4;
 
-/// The solves of a small child's operands (kernel leaves).
-struct SmallOps {
-    kind: NodeKind,
-    count: usize,
-    leaf: [u32; SMALL_OPS],
-    r: [Ranges8; SMALL_OPS],
+/// The solves of a small node's operands (kernel leaves), at most `N`.
+pub(crate) struct SmallOps<const N: usize> {
+    pub(crate) kind: NodeKind,
+    pub(crate) count: usize,
+    pub(crate) leaf: [u32; N],
+    pub(crate) r: [Ranges8; N],
 }
 
-/// What a small child's result on a lane's range is known to be.
+/// What a small node's result on a lane's range is known to be.
 #[derive(Debug, PartialEq)]
-enum SmallFirst {
+pub(crate) enum SmallFirst {
     /// No span.
     Empty,
     /// The range may start inside it.
     Inside,
     /// Not known exactly: any span starts at this place or later.
     From(f32),
-    /// Its first span (with a real entry, longer than `8 eps`) and where
-    /// its next span starts (infinity: none).
+    /// Its first span (with a real entry) and where its next span starts
+    /// (infinity: none).
     Span { t: (f32, f32), s: (Surf, Surf), next: f32 },
 }
 
-/// Lane `k`'s first span of a small child from its operands' spans on the
-/// range starting at `lo`, each operand one span at most (kernel leaves are
-/// convex).
+/// Lane `k`'s first span of a small node (a union, intersection or
+/// difference of at most `N` kernel leaves; `E = 2 N`) from its operands'
+/// spans on the range starting at `lo`, each operand one span at most
+/// (kernel leaves are convex).
 ///
 /// Where every boundary of the operands from `lo - 2 eps` on lies more than
 /// `2 eps` from the next one and from `lo`, `combine` fuses, merges and
-/// drops nothing (its tolerances are eps), and the lane walk's `leaf_node`,
-/// which narrows each operand's range to the result so far, gives the exact
-/// set operation's spans: their boundaries are the operands', those of a
-/// subtrahend flipped. Its first span is taken when longer than `8 eps`
-/// (then a settled lane cuts it at `v`, whatever clips its exit).
-/// Otherwise each result boundary is one of the operands' boundaries or
-/// fused with one within eps, so no span starts before the first boundary
-/// past `lo - 2 eps` less eps.
-fn small_first(ops: &SmallOps, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
-    let subtract = ops.kind == NodeKind::Difference;
+/// drops nothing (its tolerances are eps), and `leaf_node`, which narrows
+/// each operand's range to the result so far (and stops a union in nearest
+/// mode a little past its first entry), gives the exact set operation's
+/// spans up to where it stops: their boundaries are the operands', those
+/// of a subtrahend flipped. Otherwise each result boundary is one of the
+/// operands' boundaries or fused with one within eps, so no span starts
+/// before the first boundary past `lo - 2 eps` less eps.
+pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
+    debug_assert!(E == 2 * N);
     // Boundaries (place, operand, exit) past lo - 2 eps, and which operands
     // the range starts inside.
-    let mut ev = [(0.0f32, 0usize, false); 2 * SMALL_OPS];
+    let mut ev = [(0.0f32, 0usize, false); E];
     let mut n = 0;
-    let mut inside = [false; SMALL_OPS];
+    let mut inside = [false; N];
     let near = lo - 2.0 * eps;
     for j in 0..ops.count {
         let r = &ops.r[j];
@@ -440,10 +446,13 @@ fn small_first(ops: &SmallOps, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
             j -= 1;
         }
     }
-    let member = |inside: &[bool; SMALL_OPS]| match subtract {
-        true => inside[0] && !inside[1..ops.count].iter().any(|&b| b),
-        false => inside[..ops.count].iter().all(|&b| b),
+    let kind = ops.kind;
+    let member = |inside: &[bool; N]| match kind {
+        NodeKind::Difference => inside[0] && !inside[1..ops.count].iter().any(|&b| b),
+        NodeKind::Intersection => inside[..ops.count].iter().all(|&b| b),
+        _ => inside[..ops.count].iter().any(|&b| b),
     };
+    let subtract = kind == NodeKind::Difference;
     let mut sure = true;
     let mut prev = lo;
     for &(t, _, _) in ev.iter() {
@@ -488,25 +497,15 @@ fn small_first(ops: &SmallOps, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
             (true, None, None) => start = Some((e.0, surf(e))),
             (false, Some(s0), None) => span = Some((s0, (e.0, surf(e)))),
             (true, _, Some(((t0, s0), (t1, s1)))) => {
-                return first_span((t0, t1), (s0, s1), e.0, eps);
+                return SmallFirst::Span { t: (t0, t1), s: (s0, s1), next: e.0 };
             }
             _ => {}
         }
     }
     match (start, span) {
-        (_, Some(((t0, s0), (t1, s1)))) => first_span((t0, t1), (s0, s1), f32::INFINITY, eps),
+        (_, Some(((t0, s0), (t1, s1)))) => SmallFirst::Span { t: (t0, t1), s: (s0, s1), next: f32::INFINITY },
         // Open to the end (an exit at infinity left out above).
-        (Some((t0, s0)), None) => first_span((t0, f32::INFINITY), (s0, Surf::NONE), f32::INFINITY, eps),
+        (Some((t0, s0)), None) => SmallFirst::Span { t: (t0, f32::INFINITY), s: (s0, Surf::NONE), next: f32::INFINITY },
         _ => SmallFirst::Empty,
-    }
-}
-
-/// [`SmallFirst::Span`] when the span is longer than `8 eps`, else only
-/// its start.
-fn first_span((t0, t1): (f32, f32), s: (Surf, Surf), next: f32, eps: f32) -> SmallFirst {
-    if t1 - t0 > 8.0 * eps {
-        SmallFirst::Span { t: (t0, t1), s, next }
-    } else {
-        SmallFirst::From(t0)
     }
 }

@@ -94,6 +94,20 @@ impl BoxList {
         for v in out.iter_mut() {
             v.clear();
         }
+        self.packet_tests(test, range, |id, hit, t0| {
+            let mut m = hit & lanes;
+            while m != 0 {
+                let k = m.trailing_zeros() as usize;
+                m &= m - 1;
+                out[k].push((canonical(t0[k]), id));
+            }
+        });
+    }
+
+    /// `f(id, lanes hit, entries)` for every box in list order: the
+    /// packet's 8-lane test of it (entries not yet [`canonical`]).
+    #[inline(always)]
+    pub fn packet_tests(&self, test: &BoxTest8, range: (&[f32; 8], &[f32; 8]), mut f: impl FnMut(u32, u32, &[f32; 8])) {
         for (gi, g) in self.groups.iter().enumerate() {
             for j in 0..(self.len - 4 * gi).min(4) {
                 let b = Aabb::new(
@@ -101,12 +115,7 @@ impl BoxList {
                     glam::Vec3::new(g.max[0][j], g.max[1][j], g.max[2][j]),
                 );
                 let (hit, t0) = test.ray_range(&b, range.0, range.1);
-                let mut m = hit & lanes;
-                while m != 0 {
-                    let k = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    out[k].push((canonical(t0[k]), g.id[j]));
-                }
+                f(g.id[j], hit, &t0);
             }
         }
     }

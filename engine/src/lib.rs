@@ -38,6 +38,7 @@ mod live_meshes;
 mod live_tests;
 mod owners;
 mod packet;
+mod packet_first;
 pub mod part;
 mod refit;
 pub mod render;

@@ -13,6 +13,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Span, Surf,
 };
 
+use crate::packet_first::PacketRays;
 use crate::scene::{Hit, Ray, RenderScene};
 use crate::tile::TileView;
 
@@ -157,6 +158,8 @@ pub struct PacketScratch {
     /// Per lane, the tile's listed objects along its ray
     /// ([`packet_candidates`]).
     listed: [Vec<(f32, u32)>; 8],
+    /// The objects the packet meets, for `packet_first.rs`.
+    pub(crate) met: Vec<crate::packet_first::Met>,
 }
 
 /// The objects of `tile`'s list along each of the eight `rays` (lanes
@@ -506,13 +509,25 @@ impl RenderScene {
     fn lane_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
         let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
         ready_memo(&mut ps.memo, &plain, tile);
-        let listed = packet_candidates(tile, rays, 0xff, &mut ps.listed);
-        let memo = &ps.memo;
         let mut found = [None; 8];
+        // Lanes settled by the objects' packet answers (`packet_first.rs`).
+        let settled = self.packet_nearest(&PacketRays { rays, ctx: &plain, memo: &ps.memo }, tile, &mut ps.met, &mut found);
+        if settled == 0xff {
+            for o in out.iter_mut().take(8) {
+                *o = None;
+            }
+            self.make_hits(rays, &found, normals, out);
+            return;
+        }
+        let listed = packet_candidates(tile, rays, 0xff & !settled, &mut ps.listed);
+        let memo = &ps.memo;
         for k in 0..8 {
+            out[k] = None;
+            if settled & (1 << k) != 0 {
+                continue;
+            }
             let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
             found[k] = self.nearest_ctx(&ctx, &mut ps.scratch, tile, listed.then_some(&mut ps.listed[k]));
-            out[k] = None;
         }
         self.make_hits(rays, &found, normals, out);
     }
@@ -528,9 +543,16 @@ impl RenderScene {
         if n == 8 && !self.ray_by_ray && shares_work(tile) && rays.iter().all(plain) {
             let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
             ready_memo(&mut ps.memo, &ctx, tile);
-            let listed = packet_candidates(tile, rays, 0xff, &mut ps.listed);
+            let settled = self.packet_any(&PacketRays { rays, ctx: &ctx, memo: &ps.memo }, tile, &mut ps.met, out);
+            if settled == 0xff {
+                return;
+            }
+            let listed = packet_candidates(tile, rays, 0xff & !settled, &mut ps.listed);
             let memo = &ps.memo;
             for k in 0..8 {
+                if settled & (1 << k) != 0 {
+                    continue;
+                }
                 let lane = RayCtx { memo: Some((memo, k)), ..ctx[k] };
                 out[k] = self.occluded_listed(&lane, &mut ps.scratch, tile, listed.then_some(&mut ps.listed[k]));
             }

@@ -34,6 +34,10 @@ pub struct TileScratch {
     /// packet of the tile's rays walks together,
     /// `PacketMemo::walk_unions_for`)?
     unions: bool,
+    /// Is every kept object's root a kernel leaf or a small node of them
+    /// (`Program::packet_first_node`: its packets pick their nearest hits
+    /// among the objects together, `packet_first.rs`)?
+    simple: bool,
     /// Counts since the last [`TileScratch::take_counts`].
     counts: TileStats,
 }
@@ -79,6 +83,9 @@ pub struct TileView<'a> {
     pub(crate) unions: bool,
     /// Has the tile leaves with packet kernels (`LeafTable::ranges8`)?
     pub(crate) kernels8: bool,
+    /// Are all its objects' roots answered by `PacketMemo::first_surfaces8`
+    /// (see `TileScratch`)?
+    pub(crate) simple: bool,
 }
 
 impl TileView<'_> {
@@ -106,6 +113,7 @@ impl TileScratch {
             bounded: self.listed.then_some(&self.boxes),
             unions: self.unions,
             kernels8: self.tp.kernels8(),
+            simple: self.simple,
         }
     }
 
@@ -161,6 +169,7 @@ impl RenderScene {
             }
         }
         ts.unions = ts.live.iter().any(|&oi| ts.tp.prog.walks_in_packets(ts.root_of[oi as usize]));
+        ts.simple = ts.live.iter().all(|&oi| ts.tp.prog.packet_first_node(&self.leaves, ts.root_of[oi as usize]));
         let TileScratch { live, counts, .. } = ts;
         counts.tiles += 1;
         counts.objects_kept += live.len() as u64;

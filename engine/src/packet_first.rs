@@ -1,0 +1,198 @@
+//! Nearest and any hits picked for a whole packet among the objects of a
+//! tile whose objects are all kernel leaves or small nodes of them
+//! ([`Program::packet_first_node`](rothray_csg::Program::packet_first_node)):
+//! each object's box tested and first surface found for the eight lanes at
+//! once ([`PacketMemo::first_surfaces8`]), instead of each lane visiting its
+//! candidates in order and evaluating them one by one
+//! ([`RenderScene::nearest_ctx`]).
+//!
+//! A lane's own visit takes, in the order of box entry then index, each
+//! object whose first surface on the range left lies before the best so
+//! far: its answer is the smallest first surface, the earlier object on a
+//! tie. Here every object the lane's box test passes is asked once on the
+//! lane's whole range, and the smallest answer is taken when it is that
+//! visit's answer for sure:
+//! * no object is [`FirstOf::Unsure`] on the lane;
+//! * the next smallest answer lies more than `16 eps` past it (no tie, and
+//!   an object asked on the range cut at the best answer, as the visit asks
+//!   the later ones, answers the same: a cut changes a first surface only
+//!   within a few eps of it, the margin of `RenderScene::redo`);
+//! * its box entry is not past it (the visit reaches it).
+//!
+//! Other lanes go their own way. The same boxes are tested as the lanes'
+//! own lists ([`BoxList::packet_entries`]; none for a lone object, which
+//! the evaluation takes without a box test).
+
+use rothray_csg::{FirstOf, LaneRanges, PacketMemo, RayCtx};
+use rothray_primitives::{box_wide::BoxTest8, Surf};
+
+use crate::box_list::BoxList;
+use crate::scene::{Ray, RenderScene};
+use crate::tile::TileView;
+
+/// The lanes' smallest answers so far.
+struct Best {
+    t: [f32; 8],
+    hit: [Option<(u32, Surf)>; 8],
+    /// The smallest one's box entry.
+    entry: [f32; 8],
+    /// The next smallest answer.
+    second: [f32; 8],
+    /// Some object's answer is not known here.
+    unsure: u32,
+    /// Some lane has a hit.
+    any: u32,
+}
+
+impl Best {
+    fn new() -> Best {
+        let inf = [f32::INFINITY; 8];
+        Best { t: inf, hit: [None; 8], entry: inf, second: inf, unsure: 0, any: 0 }
+    }
+
+    /// Takes object `oi`'s answers `firsts` on the lanes `lanes`, whose box
+    /// entries are `entry`.
+    #[inline(always)]
+    fn take(&mut self, oi: u32, lanes: u32, firsts: &[FirstOf; 8], entry: &[f32; 8]) {
+        let mut m = lanes;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            match firsts[k] {
+                FirstOf::Miss => {}
+                FirstOf::Unsure => self.unsure |= 1 << k,
+                FirstOf::Hit(t, s) => {
+                    self.any |= 1 << k;
+                    if t < self.t[k] {
+                        self.second[k] = self.t[k];
+                        (self.t[k], self.hit[k], self.entry[k]) = (t, Some((oi, s)), entry[k]);
+                    } else {
+                        self.second[k] = self.second[k].min(t);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The packet's lanes as the objects are asked about them.
+pub(crate) struct PacketRays<'a> {
+    pub(crate) rays: &'a [Ray],
+    pub(crate) ctx: &'a [RayCtx<'a>; 8],
+    pub(crate) memo: &'a PacketMemo,
+}
+
+/// An object the packet meets: the smallest of its lanes' box entries,
+/// the object, those lanes and their entries.
+pub(crate) type Met = (f32, u32, u32, [f32; 8]);
+
+impl RenderScene {
+    /// The objects' answers for the packet `p` in `tile` (whose objects are
+    /// all simple and listed: `tile.simple`, `list`) into `best`, asked
+    /// nearest box first, each for the lanes whose best answer so far its
+    /// box entry lies within `16 eps` of (an object entered further on
+    /// cannot change a lane's answer, nor its settling: its first surface
+    /// lies past its entry, and the lane's own visit stops before it);
+    /// `false` when the packet solves no leaves.
+    fn packet_firsts(&self, p: &PacketRays, (tile, list): (&TileView, &BoxList), met: &mut Vec<Met>, best: &mut Best) -> bool {
+        let tmin: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmin);
+        let tmax: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmax);
+        let eps: [f32; 8] = std::array::from_fn(|k| p.ctx[k].eps);
+        let ranges = LaneRanges { tmin: &tmin, tmax: &tmax, eps: &eps };
+        let mut firsts = [FirstOf::Miss; 8];
+        met.clear();
+        for &oi in &self.unbounded {
+            if tile.root(oi).is_some() {
+                met.push((f32::NEG_INFINITY, oi, 0xff, tmin));
+            }
+        }
+        if list.len() == 1 {
+            met.push((f32::NEG_INFINITY, list.first_id(), 0xff, tmin));
+        } else {
+            let o = std::array::from_fn(|k| p.rays[k].origin);
+            let Some(test) = BoxTest8::new(&o, &std::array::from_fn(|k| p.rays[k].dir)) else { return false };
+            list.packet_tests(&test, (&tmin, &tmax), |oi, hit, t0| {
+                if hit != 0 {
+                    let mut key = f32::INFINITY;
+                    for k in 0..8 {
+                        key = if hit & (1 << k) != 0 { key.min(t0[k]) } else { key };
+                    }
+                    met.push((key, oi, hit, *t0));
+                }
+            });
+            met.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+        }
+        for &(_, oi, hit, entry) in met.iter() {
+            let mut lanes = hit;
+            for k in 0..8 {
+                lanes &= if entry[k] <= best.t[k] + 16.0 * eps[k] { u32::MAX } else { !(1 << k) };
+            }
+            let Some(root) = tile.root(oi) else { continue };
+            if lanes == 0 {
+                continue;
+            }
+            if !p.memo.first_surfaces8(tile.prog, &self.leaves, root, lanes, ranges, &mut firsts) {
+                return false;
+            }
+            best.take(oi, lanes, &firsts, &entry);
+        }
+        true
+    }
+
+    /// The nearest hits (object, `t`, surface) of the lanes of packet `p`
+    /// that the objects' packet answers settle, into `found`; returns those
+    /// lanes (0 when the tile is not one of simple listed objects).
+    pub(crate) fn packet_nearest(
+        &self,
+        p: &PacketRays,
+        tile: Option<&TileView>,
+        met: &mut Vec<Met>,
+        found: &mut [Option<(u32, f32, Surf)>; 8],
+    ) -> u32 {
+        let Some(t) = tile.filter(|t| t.simple) else { return 0 };
+        let Some(list) = t.bounded else { return 0 };
+        let mut best = Best::new();
+        if !self.packet_firsts(p, (t, list), met, &mut best) {
+            return 0;
+        }
+        let mut settled = 0u32;
+        for k in 0..8 {
+            if best.unsure & (1 << k) != 0 {
+                continue;
+            }
+            found[k] = match best.hit[k] {
+                None => None,
+                Some((oi, s)) => {
+                    let tk = best.t[k];
+                    if !(best.second[k] > tk + 16.0 * p.ctx[k].eps && best.entry[k] <= tk) {
+                        continue;
+                    }
+                    Some((oi, tk, s))
+                }
+            };
+            settled |= 1 << k;
+        }
+        rothray_csg::counts::object_lanes(settled.count_ones(), 8 - settled.count_ones());
+        settled
+    }
+
+    /// Any hits of the lanes of packet `p` that the objects' packet answers
+    /// settle (some object has a surface on the lane's range, or none may),
+    /// into `out`; returns those lanes.
+    pub(crate) fn packet_any(&self, p: &PacketRays, tile: Option<&TileView>, met: &mut Vec<Met>, out: &mut [bool]) -> u32 {
+        let Some(t) = tile.filter(|t| t.simple) else { return 0 };
+        let Some(list) = t.bounded else { return 0 };
+        let mut best = Best::new();
+        if !self.packet_firsts(p, (t, list), met, &mut best) {
+            return 0;
+        }
+        let settled = (best.any | !best.unsure) & 0xff;
+        rothray_csg::counts::object_lanes(settled.count_ones(), 8 - settled.count_ones());
+        for k in 0..8 {
+            if settled & (1 << k) != 0 {
+                out[k] = best.any & (1 << k) != 0;
+            }
+        }
+        settled
+    }
+}
