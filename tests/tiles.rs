@@ -618,7 +618,7 @@ fn packets_find_first_entries_of_unions_of_small_trees() {
     assert!(hits > rays / 4 && c.first_settled > rays / 5 && c.packet_misses > rays / 50, "too few hits, or lanes settled or not, to test");
 }
 
-/// A small object: a kernel leaf (sheared in some), or a union,
+/// A small object: a kernel leaf (sheared in some), a torus, or a union,
 /// intersection or difference of two to six of them (bounded first
 /// operand), some operands near twins of another.
 fn simple_object(rng: &mut SmallRng, spread: f64) -> Shape {
@@ -629,7 +629,10 @@ fn simple_object(rng: &mut SmallRng, spread: f64) -> Shape {
         2 => Shape::Cone { a: c, b: c + DVec3::new(0.0, rng.gen_range(0.1..0.6), 0.0), ra: rng.gen_range(0.05..0.3), rb: 0.0 },
         _ => Shape::Cylinder { a: c - rp(rng, 0.2), b: c + rp(rng, 0.3), r: rng.gen_range(0.03..0.2) },
     };
-    let s = if rng.gen_bool(0.5) {
+    let s = if rng.gen_bool(0.1) {
+        // A leaf without a packet kernel: each lane asks it itself.
+        Shape::Torus { c, axis: (DVec3::Y + rp(rng, 1.0)).normalize(), major: rng.gen_range(0.1..0.4), minor: rng.gen_range(0.02..0.1) }
+    } else if rng.gen_bool(0.5) {
         leaf(rng)
     } else {
         let mut ops = vec![leaf(rng)];

@@ -511,7 +511,8 @@ impl RenderScene {
         ready_memo(&mut ps.memo, &plain, tile);
         let mut found = [None; 8];
         // Lanes settled by the objects' packet answers (`packet_first.rs`).
-        let settled = self.packet_nearest(&PacketRays { rays, ctx: &plain, memo: &ps.memo }, tile, &mut ps.met, &mut found);
+        let settled =
+            self.packet_nearest(&PacketRays { rays, ctx: &plain, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), &mut found);
         if settled == 0xff {
             for o in out.iter_mut().take(8) {
                 *o = None;
@@ -543,7 +544,7 @@ impl RenderScene {
         if n == 8 && !self.ray_by_ray && shares_work(tile) && rays.iter().all(plain) {
             let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
             ready_memo(&mut ps.memo, &ctx, tile);
-            let settled = self.packet_any(&PacketRays { rays, ctx: &ctx, memo: &ps.memo }, tile, &mut ps.met, out);
+            let settled = self.packet_any(&PacketRays { rays, ctx: &ctx, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), out);
             if settled == 0xff {
                 return;
             }

@@ -23,12 +23,22 @@
 //! own lists ([`BoxList::packet_entries`]; none for a lone object, which
 //! the evaluation takes without a box test).
 
-use rothray_csg::{FirstOf, LaneRanges, PacketMemo, RayCtx};
-use rothray_primitives::{box_wide::BoxTest8, Surf};
+use rothray_csg::{FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
+use rothray_primitives::{box_wide::BoxTest8, LeafTable, Surf};
 
 use crate::box_list::BoxList;
 use crate::scene::{Ray, RenderScene};
 use crate::tile::TileView;
+
+/// Is node `n` of `prog` an object root that a packet asks for its lanes'
+/// first surfaces: a kernel leaf or a small node of them
+/// ([`Program::packet_first_node`]: 8-lane answers), or another leaf but
+/// a mesh (each lane's own query, `RenderScene::object_first`, on its whole
+/// range: a torus, a sweep)? (A mesh object's packets take the mesh walks
+/// of `packet.rs`.)
+pub(crate) fn simple_root(prog: &Program, leaves: &LeafTable, n: u32) -> bool {
+    prog.packet_first_node(leaves, n) || (prog.kind[n as usize] == NodeKind::Leaf && !leaves.is_mesh(prog.first[n as usize]))
+}
 
 /// The lanes' smallest answers so far.
 struct Best {
@@ -94,7 +104,13 @@ impl RenderScene {
     /// cannot change a lane's answer, nor its settling: its first surface
     /// lies past its entry, and the lane's own visit stops before it);
     /// `false` when the packet solves no leaves.
-    fn packet_firsts(&self, p: &PacketRays, (tile, list): (&TileView, &BoxList), met: &mut Vec<Met>, best: &mut Best) -> bool {
+    fn packet_firsts(
+        &self,
+        p: &PacketRays,
+        (tile, list): (&TileView, &BoxList),
+        (met, scratch): (&mut Vec<Met>, &mut Scratch),
+        best: &mut Best,
+    ) -> bool {
         let tmin: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmin);
         let tmax: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmax);
         let eps: [f32; 8] = std::array::from_fn(|k| p.ctx[k].eps);
@@ -131,8 +147,22 @@ impl RenderScene {
             if lanes == 0 {
                 continue;
             }
-            if !p.memo.first_surfaces8(tile.prog, &self.leaves, root, lanes, ranges, &mut firsts) {
-                return false;
+            if tile.prog.packet_first_node(&self.leaves, root) {
+                if !p.memo.first_surfaces8(tile.prog, &self.leaves, root, lanes, ranges, &mut firsts) {
+                    return false;
+                }
+            } else {
+                // Each lane's own query of the leaf on its whole range.
+                let obj = crate::scene::ObjRef { prog: tile.prog, root, oi };
+                for k in 0..8 {
+                    if lanes & (1 << k) != 0 {
+                        let ctx = RayCtx { memo: Some((p.memo, k)), ..p.ctx[k] };
+                        firsts[k] = match self.object_first(obj, &ctx, (tmin[k], tmax[k]), scratch) {
+                            Some((t, s)) => FirstOf::Hit(t, s),
+                            None => FirstOf::Miss,
+                        };
+                    }
+                }
             }
             best.take(oi, lanes, &firsts, &entry);
         }
@@ -146,13 +176,13 @@ impl RenderScene {
         &self,
         p: &PacketRays,
         tile: Option<&TileView>,
-        met: &mut Vec<Met>,
+        (met, scratch): (&mut Vec<Met>, &mut Scratch),
         found: &mut [Option<(u32, f32, Surf)>; 8],
     ) -> u32 {
         let Some(t) = tile.filter(|t| t.simple) else { return 0 };
         let Some(list) = t.bounded else { return 0 };
         let mut best = Best::new();
-        if !self.packet_firsts(p, (t, list), met, &mut best) {
+        if !self.packet_firsts(p, (t, list), (met, scratch), &mut best) {
             return 0;
         }
         let mut settled = 0u32;
@@ -179,11 +209,17 @@ impl RenderScene {
     /// Any hits of the lanes of packet `p` that the objects' packet answers
     /// settle (some object has a surface on the lane's range, or none may),
     /// into `out`; returns those lanes.
-    pub(crate) fn packet_any(&self, p: &PacketRays, tile: Option<&TileView>, met: &mut Vec<Met>, out: &mut [bool]) -> u32 {
+    pub(crate) fn packet_any(
+        &self,
+        p: &PacketRays,
+        tile: Option<&TileView>,
+        (met, scratch): (&mut Vec<Met>, &mut Scratch),
+        out: &mut [bool],
+    ) -> u32 {
         let Some(t) = tile.filter(|t| t.simple) else { return 0 };
         let Some(list) = t.bounded else { return 0 };
         let mut best = Best::new();
-        if !self.packet_firsts(p, (t, list), met, &mut best) {
+        if !self.packet_firsts(p, (t, list), (met, scratch), &mut best) {
             return 0;
         }
         let settled = (best.any | !best.unsure) & 0xff;

@@ -160,10 +160,10 @@ fn visit_in_order(cands: &mut [(f32, u32)], mut limit: f32, scratch: &mut Scratc
 /// An object as one query evaluates it: its root in a program (the baked one
 /// or a tile's), and its index.
 #[derive(Clone, Copy)]
-struct ObjRef<'a> {
-    prog: &'a Program,
-    root: u32,
-    oi: u32,
+pub(crate) struct ObjRef<'a> {
+    pub(crate) prog: &'a Program,
+    pub(crate) root: u32,
+    pub(crate) oi: u32,
 }
 
 impl RenderScene {
@@ -250,7 +250,7 @@ impl RenderScene {
 
     /// First surface of object `oi` on `range` of `ctx`'s ray: `(t, surface)`.
     #[inline]
-    fn object_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
+    pub(crate) fn object_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
         let ObjRef { prog, root, oi } = obj;
         let (tmin, tmax) = range;
         let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);

@@ -34,9 +34,9 @@ pub struct TileScratch {
     /// packet of the tile's rays walks together,
     /// `PacketMemo::walk_unions_for`)?
     unions: bool,
-    /// Is every kept object's root a kernel leaf or a small node of them
-    /// (`Program::packet_first_node`: its packets pick their nearest hits
-    /// among the objects together, `packet_first.rs`)?
+    /// Is every kept object's root a leaf other than a mesh, or a small
+    /// node of kernel leaves (`packet_first::simple_root`: its packets pick
+    /// their nearest hits among the objects together, `packet_first.rs`)?
     simple: bool,
     /// Counts since the last [`TileScratch::take_counts`].
     counts: TileStats,
@@ -169,7 +169,7 @@ impl RenderScene {
             }
         }
         ts.unions = ts.live.iter().any(|&oi| ts.tp.prog.walks_in_packets(ts.root_of[oi as usize]));
-        ts.simple = ts.live.iter().all(|&oi| ts.tp.prog.packet_first_node(&self.leaves, ts.root_of[oi as usize]));
+        ts.simple = ts.live.iter().all(|&oi| crate::packet_first::simple_root(&ts.tp.prog, &self.leaves, ts.root_of[oi as usize]));
         let TileScratch { live, counts, .. } = ts;
         counts.tiles += 1;
         counts.objects_kept += live.len() as u64;
