@@ -17,7 +17,7 @@
 
 use rothray_primitives::{kernels8::Ranges8, LeafTable, Surf};
 
-use super::union_first::{small_first, SmallFirst, SmallOps};
+use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::{NodeKind, PacketMemo, Program};
 
 /// The most operands of an object's root that [`PacketMemo::first_surfaces8`]
@@ -71,16 +71,11 @@ impl PacketMemo {
             let leaf = prog.first[nu];
             return self.with_solve(leaves, leaf, |r| leaf_firsts(r, leaf, lanes, ray, out)).is_some();
         }
-        let (first, count) = (prog.first[nu] as usize, prog.count[nu] as usize);
-        let mut ops = SmallOps::<OBJECT_OPS> { kind: prog.kind[nu], count, leaf: [0; OBJECT_OPS], r: [Ranges8::default(); OBJECT_OPS] };
-        let mut done = lanes;
-        for j in 0..count {
-            let leaf = prog.first[prog.children[first + j] as usize];
-            ops.leaf[j] = leaf;
-            let Some(r) = self.with_solve(leaves, leaf, |r| *r) else { return false };
-            ops.r[j] = r;
-            done &= r.done;
+        let mut ops = SmallOps::<OBJECT_OPS>::of(prog, nu);
+        if !ops.gather(prog, nu, |leaf| self.with_solve(leaves, leaf, |r| *r)) {
+            return false;
         }
+        let done = lanes & ops.done;
         for k in 0..8 {
             if lanes & (1 << k) == 0 {
                 continue;
@@ -125,17 +120,13 @@ fn leaf_firsts(r: &Ranges8, leaf: u32, lanes: u32, ray: LaneRanges, out: &mut [F
             out[k] = FirstOf::Miss;
             continue;
         }
-        let (t0, t1, lo, hi) = (r.t0[k], r.t1[k], ray.tmin[k], ray.tmax[k]);
-        let real0 = t0 >= lo && t0.is_finite();
-        let real1 = t1 <= hi && t1.is_finite();
-        let c0 = if real0 { t0 } else { t0.max(lo) };
-        let c1 = if real1 { t1 } else { t1.min(hi) };
+        let Clipped { c0, c1, real0, real1 } = Clipped::lane(r, k, (ray.tmin[k], ray.tmax[k]));
         out[k] = if !(c1 > c0) {
             FirstOf::Miss
         } else if real0 {
-            FirstOf::Hit(t0, Surf::new(leaf, r.s0[k]))
+            FirstOf::Hit(c0, Surf::new(leaf, r.s0[k]))
         } else if real1 {
-            FirstOf::Hit(t1, Surf::new(leaf, r.s1[k]))
+            FirstOf::Hit(c1, Surf::new(leaf, r.s1[k]))
         } else {
             FirstOf::Miss
         };

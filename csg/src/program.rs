@@ -1352,6 +1352,8 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
 mod leaf_packet;
 #[path = "object_packet.rs"]
 pub mod object_packet;
+#[path = "small_first.rs"]
+mod small_first;
 #[path = "small_tree.rs"]
 pub(crate) mod small_tree;
 use small_tree::SmallLists;

@@ -46,6 +46,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Span, Surf,
 };
 
+use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::{NodeKind, PacketMemo, Program};
 use crate::counts;
 
@@ -192,12 +193,7 @@ impl<'a> FirstWalk<'a> {
             if r.hit & (1 << k) == 0 {
                 continue;
             }
-            // Clipped as `push_clipped` clips a leaf's span.
-            let (t0, t1, lo, hi) = (r.t0[k], r.t1[k], self.tmin[k], self.tmax[k]);
-            let real0 = t0 >= lo && t0.is_finite();
-            let real1 = t1 <= hi && t1.is_finite();
-            let c0 = if real0 { t0 } else { t0.max(lo) };
-            let c1 = if real1 { t1 } else { t1.min(hi) };
+            let Clipped { c0, c1, real0, real1 } = Clipped::lane(r, k, (self.tmin[k], self.tmax[k]));
             if !(c1 > c0) {
                 continue;
             }
@@ -318,20 +314,10 @@ impl FirstWalk<'_> {
     /// [`FirstWalk::take_small`] for at most `N` operands (`E = 2 N`).
     #[inline(always)]
     fn take_small_n<const N: usize, const E: usize>(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
-        let prog = self.prog;
-        let (first, count) = (prog.first[c] as usize, prog.count[c] as usize);
-        let mut ops = SmallOps::<N> { kind: prog.kind[c], count, leaf: [0; N], r: [Ranges8::default(); N] };
-        let mut lanes = m;
-        for j in 0..count {
-            let leaf = prog.first[prog.children[first + j] as usize];
-            ops.leaf[j] = leaf;
-            let (memo, leaves) = (self.memo, self.leaves);
-            ops.r[j] = match memo.with_solve(leaves, leaf, |r| *r) {
-                Some(r) => r,
-                None => self.solve_here(leaf),
-            };
-            lanes &= ops.r[j].done;
-        }
+        let (prog, memo, leaves) = (self.prog, self.memo, self.leaves);
+        let mut ops = SmallOps::<N>::of(prog, c);
+        ops.gather(prog, c, |leaf| Some(memo.with_solve(leaves, leaf, |r| *r).unwrap_or_else(|| self.solve_here(leaf))));
+        let mut lanes = m & ops.done;
         // A lane that a solve left undone goes the walk's way.
         self.live &= !(m & !lanes);
         while lanes != 0 {
@@ -389,135 +375,3 @@ impl FirstWalk<'_> {
 
 /// The most operands of a child that [`FirstWalk::take_small`] takes.
 pub(crate) const SMALL_OPS: usize = 4;
-
-/// The solves of a small node's operands (kernel leaves), at most `N`.
-pub(crate) struct SmallOps<const N: usize> {
-    pub(crate) kind: NodeKind,
-    pub(crate) count: usize,
-    pub(crate) leaf: [u32; N],
-    pub(crate) r: [Ranges8; N],
-}
-
-/// What a small node's result on a lane's range is known to be.
-#[derive(Debug, PartialEq)]
-pub(crate) enum SmallFirst {
-    /// No span.
-    Empty,
-    /// The range may start inside it.
-    Inside,
-    /// Not known exactly: any span starts at this place or later.
-    From(f32),
-    /// Its first span (with a real entry) and where its next span starts
-    /// (infinity: none).
-    Span { t: (f32, f32), s: (Surf, Surf), next: f32 },
-}
-
-/// Lane `k`'s first span of a small node (a union, intersection or
-/// difference of at most `N` kernel leaves; `E = 2 N`) from its operands'
-/// spans on the range starting at `lo`, each operand one span at most
-/// (kernel leaves are convex).
-///
-/// Where every boundary of the operands from `lo - 2 eps` on lies more than
-/// `2 eps` from the next one and from `lo`, `combine` fuses, merges and
-/// drops nothing (its tolerances are eps), and `leaf_node`, which narrows
-/// each operand's range to the result so far (and stops a union in nearest
-/// mode a little past its first entry), gives the exact set operation's
-/// spans up to where it stops: their boundaries are the operands', those
-/// of a subtrahend flipped. Otherwise each result boundary is one of the
-/// operands' boundaries or fused with one within eps, so no span starts
-/// before the first boundary past `lo - 2 eps` less eps.
-pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
-    debug_assert!(E == 2 * N);
-    // Boundaries (place, operand, exit) past lo - 2 eps, and which operands
-    // the range starts inside.
-    let mut ev = [(0.0f32, 0usize, false); E];
-    let mut n = 0;
-    let mut inside = [false; N];
-    let near = lo - 2.0 * eps;
-    for j in 0..ops.count {
-        let r = &ops.r[j];
-        if r.hit & (1 << k) == 0 {
-            continue;
-        }
-        for (t, exit) in [(r.t0[k], false), (r.t1[k], true)] {
-            if t < near {
-                inside[j] = !exit;
-            } else {
-                ev[n] = (t, j, exit);
-                n += 1;
-            }
-        }
-    }
-    let ev = &mut ev[..n];
-    // (By hand: at most eight, and `sort_unstable_by` was a call per lane
-    // and child.)
-    for i in 1..ev.len() {
-        let mut j = i;
-        while j > 0 && ev[j - 1].0.total_cmp(&ev[j].0).is_gt() {
-            ev.swap(j - 1, j);
-            j -= 1;
-        }
-    }
-    let kind = ops.kind;
-    let member = |inside: &[bool; N]| match kind {
-        NodeKind::Difference => inside[0] && !inside[1..ops.count].iter().any(|&b| b),
-        NodeKind::Intersection => inside[..ops.count].iter().all(|&b| b),
-        _ => inside[..ops.count].iter().any(|&b| b),
-    };
-    let subtract = kind == NodeKind::Difference;
-    let mut sure = true;
-    let mut prev = lo;
-    for &(t, _, _) in ev.iter() {
-        if t == f32::INFINITY {
-            break; // (ends at infinity bound nothing the range keeps)
-        }
-        if !(t - prev > 2.0 * eps) {
-            sure = false;
-            break;
-        }
-        prev = t;
-    }
-    if member(&inside) {
-        return SmallFirst::Inside;
-    }
-    if !sure {
-        return match ev.first() {
-            Some(&(t, _, _)) => SmallFirst::From(t - eps),
-            None => SmallFirst::Empty,
-        };
-    }
-    let surf = |(_, j, exit): (f32, usize, bool)| {
-        let r = &ops.r[j];
-        let s = Surf::new(ops.leaf[j], if exit { r.s1[k] } else { r.s0[k] });
-        if subtract && j > 0 {
-            s.flip()
-        } else {
-            s
-        }
-    };
-    let mut span: Option<((f32, Surf), (f32, Surf))> = None;
-    let mut start = None;
-    let mut was = false;
-    for &e in ev.iter() {
-        inside[e.1] = !e.2;
-        let now = member(&inside);
-        if now == was {
-            continue;
-        }
-        was = now;
-        match (now, start, span) {
-            (true, None, None) => start = Some((e.0, surf(e))),
-            (false, Some(s0), None) => span = Some((s0, (e.0, surf(e)))),
-            (true, _, Some(((t0, s0), (t1, s1)))) => {
-                return SmallFirst::Span { t: (t0, t1), s: (s0, s1), next: e.0 };
-            }
-            _ => {}
-        }
-    }
-    match (start, span) {
-        (_, Some(((t0, s0), (t1, s1)))) => SmallFirst::Span { t: (t0, t1), s: (s0, s1), next: f32::INFINITY },
-        // Open to the end (an exit at infinity left out above).
-        (Some((t0, s0)), None) => SmallFirst::Span { t: (t0, f32::INFINITY), s: (s0, Surf::NONE), next: f32::INFINITY },
-        _ => SmallFirst::Empty,
-    }
-}
