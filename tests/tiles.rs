@@ -364,6 +364,46 @@ fn insert_near_twins(rng: &mut SmallRng, kids: &mut Vec<Shape>, most: usize) {
     }
 }
 
+/// A tile's shadow packet: eight parallel rays along `d` from a box of
+/// origins around `o`, and the region of their own (f32) origins swept
+/// along `d`, as the renderer makes it.
+fn shadow_packet(rng: &mut SmallRng, o: DVec3, d: DVec3) -> (Vec<Ray>, Frustum) {
+    let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
+    let rays: Vec<Ray> = (0..8)
+        .map(|_| to_ray(o + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h, d))
+        .collect();
+    let mut org = rothray::primitives::Aabb::EMPTY;
+    for r in &rays {
+        org.grow(r.origin);
+    }
+    (rays, Frustum::sweep(&org, d.as_vec3()))
+}
+
+/// A tile's camera packet: eight rays from `o` inside the pyramid of half
+/// extents `half` around `d`, and that pyramid.
+fn camera_packet(rng: &mut SmallRng, o: DVec3, d: DVec3, half: (f64, f64)) -> (Vec<Ray>, Frustum) {
+    let (e, region) = pyramid_around(o, d, half);
+    (packet_in_pyramid(rng, o, &e), region)
+}
+
+/// The packet's nearest and any hits through the tile prepared for
+/// `region` (none when the tile meets no object).
+fn trace_tile(
+    scene: &rothray::engine::RenderScene,
+    (ps, ts): (&mut PacketScratch, &mut TileScratch),
+    packet: &[Ray],
+    region: &Frustum,
+) -> ([Option<rothray::engine::Hit>; 8], [bool; 8]) {
+    let mut out = [None; 8];
+    let mut blocked = [false; 8];
+    if scene.prepare_tile(region, ts) {
+        let view = ts.view();
+        scene.intersect_packet_with(packet, ps, &mut out, true, Some(&view));
+        scene.occluded_packet(packet, ps, &mut blocked, Some(&view));
+    }
+    (out, blocked)
+}
+
 /// Packets of a tile walk its wide unions of leaves together, and every
 /// ray still gets exactly (bit for bit) what it gets alone: camera packets
 /// (one origin) and packets of parallel rays from a box of origins (a
@@ -430,31 +470,8 @@ fn walk_wide_unions(far: bool) {
                 let (o, d) = ((o + off).as_vec3().as_dvec3(), d.normalize());
                 let half = if t % 2 == 0 { (0.15, 0.1) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
                 let shadow = t % 4 == 3;
-                let (packet, region): (Vec<Ray>, Frustum) = if shadow {
-                    // Parallel rays from a box of origins.
-                    let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
-                    let rays: Vec<Ray> = (0..8)
-                        .map(|_| {
-                            to_ray(o + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h, d)
-                        })
-                        .collect();
-                    // The box of the rays' own (f32) origins, as the renderer makes it.
-                    let mut org = rothray::primitives::Aabb::EMPTY;
-                    for r in &rays {
-                        org.grow(r.origin);
-                    }
-                    (rays, Frustum::sweep(&org, d.as_vec3()))
-                } else {
-                    let (e, region) = pyramid_around(o, d, half);
-                    (packet_in_pyramid(&mut rng, o, &e), region)
-                };
-                let mut out = [None; 8];
-                let mut blocked = [false; 8];
-                if scene.prepare_tile(&region, &mut ts) {
-                    let view = ts.view();
-                    scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
-                    scene.occluded_packet(&packet, &mut ps, &mut blocked, Some(&view));
-                }
+                let (packet, region) = if shadow { shadow_packet(&mut rng, o, d) } else { camera_packet(&mut rng, o, d, half) };
+                let (out, blocked) = trace_tile(&scene, (&mut ps, &mut ts), &packet, &region);
                 lists += ts.take_counts().spec.lists;
                 for k in 0..8 {
                     assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
@@ -568,30 +585,8 @@ fn packets_find_first_entries_of_unions_of_small_trees() {
                 let (o, d) = random_ray(&mut rng);
                 let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
                 let half = if t % 2 == 0 { (0.15, 0.1) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
-                let (packet, region): (Vec<Ray>, Frustum) = if t % 4 == 3 {
-                    // A tile's shadow rays: parallel, from a box of origins.
-                    let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
-                    let rays: Vec<Ray> = (0..8)
-                        .map(|_| {
-                            to_ray(o + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h, d)
-                        })
-                        .collect();
-                    let mut org = rothray::primitives::Aabb::EMPTY;
-                    for r in &rays {
-                        org.grow(r.origin);
-                    }
-                    (rays, Frustum::sweep(&org, d.as_vec3()))
-                } else {
-                    let (e, region) = pyramid_around(o, d, half);
-                    (packet_in_pyramid(&mut rng, o, &e), region)
-                };
-                let mut out = [None; 8];
-                let mut blocked = [false; 8];
-                if scene.prepare_tile(&region, &mut ts) {
-                    let view = ts.view();
-                    scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
-                    scene.occluded_packet(&packet, &mut ps, &mut blocked, Some(&view));
-                }
+                let (packet, region) = if t % 4 == 3 { shadow_packet(&mut rng, o, d) } else { camera_packet(&mut rng, o, d, half) };
+                let (out, blocked) = trace_tile(&scene, (&mut ps, &mut ts), &packet, &region);
                 for k in 0..8 {
                     assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
                 }
@@ -694,30 +689,13 @@ fn packets_pick_hits_among_simple_objects() {
             for t in 0..16 {
                 let (o, d) = random_ray(&mut rng);
                 let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
-                let (packet, region): (Vec<Ray>, Frustum) = if t % 4 == 3 {
-                    let h = DVec3::new(rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3), rng.gen_range(0.0..0.3));
-                    let rays: Vec<Ray> = (0..8)
-                        .map(|_| {
-                            to_ray(o + DVec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * h, d)
-                        })
-                        .collect();
-                    let mut org = rothray::primitives::Aabb::EMPTY;
-                    for r in &rays {
-                        org.grow(r.origin);
-                    }
-                    (rays, Frustum::sweep(&org, d.as_vec3()))
+                let (packet, region) = if t % 4 == 3 {
+                    shadow_packet(&mut rng, o, d)
                 } else {
                     let half = if t % 2 == 0 { (0.3, 0.2) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
-                    let (e, region) = pyramid_around(o, d, half);
-                    (packet_in_pyramid(&mut rng, o, &e), region)
+                    camera_packet(&mut rng, o, d, half)
                 };
-                let mut out = [None; 8];
-                let mut blocked = [false; 8];
-                if scene.prepare_tile(&region, &mut ts) {
-                    let view = ts.view();
-                    scene.intersect_packet_with(&packet, &mut ps, &mut out, true, Some(&view));
-                    scene.occluded_packet(&packet, &mut ps, &mut blocked, Some(&view));
-                }
+                let (out, blocked) = trace_tile(&scene, (&mut ps, &mut ts), &packet, &region);
                 for k in 0..8 {
                     let one = scene.intersect(&packet[k]);
                     let ctx = || {

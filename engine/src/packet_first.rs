@@ -169,6 +169,15 @@ impl RenderScene {
         true
     }
 
+    /// The objects' answers for packet `p` when `tile` is one of simple
+    /// listed objects and the packet solves its leaves ([`RenderScene::packet_firsts`]),
+    /// into `best`; `false` otherwise.
+    fn tile_firsts(&self, p: &PacketRays, tile: Option<&TileView>, scratch: (&mut Vec<Met>, &mut Scratch), best: &mut Best) -> bool {
+        let Some(t) = tile.filter(|t| t.simple) else { return false };
+        let Some(list) = t.bounded else { return false };
+        self.packet_firsts(p, (t, list), scratch, best)
+    }
+
     /// The nearest hits (object, `t`, surface) of the lanes of packet `p`
     /// that the objects' packet answers settle, into `found`; returns those
     /// lanes (0 when the tile is not one of simple listed objects).
@@ -179,10 +188,8 @@ impl RenderScene {
         (met, scratch): (&mut Vec<Met>, &mut Scratch),
         found: &mut [Option<(u32, f32, Surf)>; 8],
     ) -> u32 {
-        let Some(t) = tile.filter(|t| t.simple) else { return 0 };
-        let Some(list) = t.bounded else { return 0 };
         let mut best = Best::new();
-        if !self.packet_firsts(p, (t, list), (met, scratch), &mut best) {
+        if !self.tile_firsts(p, tile, (met, scratch), &mut best) {
             return 0;
         }
         let mut settled = 0u32;
@@ -216,10 +223,8 @@ impl RenderScene {
         (met, scratch): (&mut Vec<Met>, &mut Scratch),
         out: &mut [bool],
     ) -> u32 {
-        let Some(t) = tile.filter(|t| t.simple) else { return 0 };
-        let Some(list) = t.bounded else { return 0 };
         let mut best = Best::new();
-        if !self.packet_firsts(p, (t, list), (met, scratch), &mut best) {
+        if !self.tile_firsts(p, tile, (met, scratch), &mut best) {
             return 0;
         }
         let settled = (best.any | !best.unsure) & 0xff;
