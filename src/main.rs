@@ -580,6 +580,8 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "union_listed_collects": st.eval.listed_collects,
         "object_packet_lanes": st.eval.object_settled,
         "object_packet_left": st.eval.object_left,
+        "masked_tries_sure": st.eval.masked_sure,
+        "masked_tries_left": st.eval.masked_left,
     })
 }
 

@@ -674,3 +674,79 @@ fn small_trees_match_the_frame_path() {
     println!("{rays} rays, {roots} small-tree roots");
     assert!(rays == 60_000 && roots > 200, "{roots} small-tree roots");
 }
+
+/// A cut onion of `levels` shells around the origin: each shell the
+/// difference of a leaf and a slightly smaller copy, in a union with the
+/// deeper levels, the whole cut by one or two cutters (a rotated wedge, a
+/// ball, a half-space, or a near twin of the shell's inner surface).
+/// Rays that enter inside a cut take the nearest query's second try
+/// (`csg/src/masked.rs`).
+fn cut_onion(rng: &mut rand::rngs::SmallRng, levels: usize) -> Shape {
+    use rand::Rng;
+    let kind = rng.gen_range(0..3);
+    let leaf = |r: f64| match kind {
+        0 => Shape::Sphere { c: DVec3::ZERO, r },
+        1 => Shape::Box { min: DVec3::splat(-r), max: DVec3::splat(r) },
+        _ => Shape::Cylinder { a: DVec3::new(0.0, -r, 0.0), b: DVec3::new(0.0, r, 0.0), r },
+    };
+    let mut inner: Option<Shape> = None;
+    for k in (0..levels).rev() {
+        let r = 0.3 + 1.5 * (levels - k) as f64 / levels as f64;
+        let th = rng.gen_range(0.01..0.08);
+        let shell = Shape::Diff(vec![leaf(r), leaf(r - th)]);
+        let node = match inner.take() {
+            None => shell,
+            Some(i) if rng.gen_bool(0.2) => Shape::Union(vec![i, shell]),
+            Some(i) if rng.gen_bool(0.15) => Shape::Union(vec![shell, leaf(0.1 * r), i]),
+            Some(i) => Shape::Union(vec![shell, i]),
+        };
+        let mut parts = vec![node];
+        for _ in 0..rng.gen_range(1..3) {
+            let cutter = match rng.gen_range(0..4) {
+                0 => {
+                    // A wedge: a box corner at the centre, its floor near y = 0.
+                    let y0 = rng.gen_range(-0.1..0.1);
+                    let wedge = Shape::Box { min: DVec3::new(0.0, y0, 0.0), max: DVec3::splat(3.0) };
+                    let a = rng.gen_range(-180.0f64..180.0);
+                    let m = glam::DAffine3::from_rotation_y(a.to_radians());
+                    Shape::Xf { m, json: format!("\"rotate_deg\":[0,{a:?},0]"), s: Box::new(wedge) }
+                }
+                1 => Shape::Sphere { c: rp(rng, 1.0).normalize() * r, r: rng.gen_range(0.2..1.0) * r },
+                2 => Shape::Plane { n: rp(rng, 1.0) + DVec3::new(0.0, 0.01, 0.0), d: rng.gen_range(-0.3..0.3) },
+                // The shell's inner surface again, a hair larger or smaller.
+                _ => leaf(r - th + rng.gen_range(-2e-6..2e-6)),
+            };
+            parts.push(cutter);
+        }
+        inner = Some(Shape::Diff(parts));
+    }
+    inner.expect("levels > 0")
+}
+
+#[test]
+fn second_tries_under_masks_give_the_full_diagrams_first_surface() {
+    // Nearest hits on cut onions (the second try under masks: a union under
+    // a difference stops where its spans leave the cutters above, not at
+    // its first entry) against the first surface of the full diagram, bit
+    // for bit, and the surface; rays from all around, aimed near the centre.
+    let (mut sure, mut left, mut rays) = (0, 0, 0);
+    for s in 0..160u64 {
+        let seed = 0x0a5c_0000 + s;
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let levels = 2 + (s as usize % 9);
+        let tree = cut_onion(&mut rng, levels);
+        let scene = bake(std::slice::from_ref(&tree));
+        let _ = rothray::csg::take_eval_counts();
+        for r in 0..1500 {
+            let o = rp(&mut rng, 1.0).normalize() * 5.0;
+            let d = rp(&mut rng, 0.8) - o;
+            let ray = to_ray(o, d);
+            nearest_is_first_surface(&scene, &ray, &|| format!("seed {seed:#x} ray {r}: {ray:?} tree {}", tree.json()));
+            rays += 1;
+        }
+        let c = rothray::csg::take_eval_counts();
+        (sure, left) = (sure + c.masked_sure, left + c.masked_left);
+    }
+    println!("{rays} rays: {sure} second tries under masks sure, {left} redone in full");
+    assert!(sure > 30_000, "the onions' cuts should send many rays to the second try");
+}

@@ -19,6 +19,8 @@ thread_local! {
     static LISTED: Cell<u64> = const { Cell::new(0) };
     static OBJ_SETTLED: Cell<u64> = const { Cell::new(0) };
     static OBJ_LEFT: Cell<u64> = const { Cell::new(0) };
+    static MASKED_SURE: Cell<u64> = const { Cell::new(0) };
+    static MASKED_LEFT: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -61,6 +63,11 @@ pub struct EvalCounts {
     /// Lanes of those packets left to their own visit of the objects (an
     /// object unsure on the lane, a near tie, a box entered past the hit).
     pub object_left: u64,
+    /// Nearest queries whose second try under masks (`csg/src/masked.rs`)
+    /// gave a sure answer.
+    pub masked_sure: u64,
+    /// Second tries under masks that gave none (the query was redone in full).
+    pub masked_left: u64,
 }
 
 impl EvalCounts {
@@ -79,6 +86,8 @@ impl EvalCounts {
         self.listed_collects += o.listed_collects;
         self.object_settled += o.object_settled;
         self.object_left += o.object_left;
+        self.masked_sure += o.masked_sure;
+        self.masked_left += o.masked_left;
     }
 }
 
@@ -147,6 +156,16 @@ pub fn object_lanes(settled: u32, left: u32) {
     OBJ_LEFT.with(|x| x.set(x.get() + left as u64));
 }
 
+/// A second try under masks: it gave a sure answer, or not.
+#[inline(always)]
+pub fn masked_try(sure: bool) {
+    if sure {
+        bump(&MASKED_SURE)
+    } else {
+        bump(&MASKED_LEFT)
+    }
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -163,5 +182,7 @@ pub fn take_eval_counts() -> EvalCounts {
         listed_collects: LISTED.with(|c| c.replace(0)),
         object_settled: OBJ_SETTLED.with(|c| c.replace(0)),
         object_left: OBJ_LEFT.with(|c| c.replace(0)),
+        masked_sure: MASKED_SURE.with(|c| c.replace(0)),
+        masked_left: MASKED_LEFT.with(|c| c.replace(0)),
     }
 }

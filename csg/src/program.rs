@@ -453,6 +453,8 @@ pub struct Scratch {
     met: Vec<u32>,
     /// Accumulators of a small tree's pass, one per depth.
     small: Vec<SpanList>,
+    /// The lists of a nearest query's second try ([`Program::eval_masked`]).
+    masked: masked::MaskLists,
 }
 
 /// Builds a [`Program`] bottom-up.
@@ -1350,6 +1352,8 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
 
 #[path = "leaf_packet.rs"]
 mod leaf_packet;
+#[path = "masked.rs"]
+mod masked;
 #[path = "object_packet.rs"]
 pub mod object_packet;
 #[path = "small_first.rs"]

@@ -120,6 +120,27 @@ thread_local! {
     static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
+/// Is `f`, the first surface of `spans`, a sure nearest answer when
+/// `spans` are exact only up to `valid` (before the range's end)? Not
+/// when there is none. Nor an exit (the ray starts inside) close to
+/// `valid` (see `Program::eval`; found by a packet-against-single-ray
+/// fuzz: a union's exit at its first operand's end while the second went
+/// on). Nor an entry whose span was cut at `valid` after at most 2 eps:
+/// a confirmed entry keeps 4 eps, so this span comes from operands asked
+/// on a range cut there, and such cuts leave spans shorter than eps that
+/// regularisation drops in one operand and not in another (a cone minus
+/// a near twin of itself, asked on 1e-5 of the ray, kept its entry where
+/// the full diagram has nothing:
+/// `csg_oracle::near_twins_nearest_hits_are_first_surfaces`).
+#[inline(always)]
+fn sure(f: Option<(f32, Surf)>, spans: &[Span], valid: f32, eps: f32) -> bool {
+    let Some((t, _)) = f else { return false };
+    match spans.first() {
+        Some(s) if s.s0.is_real() => s.s1.is_real() || s.t1 < valid || s.t1 - s.t0 > 2.0 * eps,
+        _ => t < valid - 16.0 * eps,
+    }
+}
+
 /// Calls `f` with the objects of `cands` (box entry, object) in the order
 /// of entry, then object, while entries stay within the limit (`limit`,
 /// then what `f` returns): the order a sort gives, each next one picked
@@ -255,24 +276,18 @@ impl RenderScene {
         let (tmin, tmax) = range;
         let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
-        // An exit (the ray starts inside) close to where the result stops being
-        // exact is not sure (see `Program::eval`; found by a packet-against-
-        // single-ray fuzz: a union's exit at its first operand's end while the
-        // second went on). Nor is an entry whose span was cut at that limit
-        // after at most 2 eps: a confirmed entry keeps 4 eps, so this span
-        // comes from operands asked on a range cut there, and such cuts
-        // leave spans shorter than eps that regularisation drops in one
-        // operand and not in another (a cone minus a near twin of itself,
-        // asked on 1e-5 of the ray, kept its entry where the full diagram
-        // has nothing: `csg_oracle::near_twins_nearest_hits_are_first_surfaces`).
-        let unsure = |s: &Span| {
-            if s.s0.is_real() {
-                !s.s1.is_real() && s.t1 >= valid && s.t1 - s.t0 <= 2.0 * ctx.eps
-            } else {
-                f.is_some_and(|(t, _)| t >= valid - 16.0 * ctx.eps)
+        if valid < tmax && !sure(f, scratch.out.as_slice(), valid, ctx.eps) {
+            if prog.masks_help(root) {
+                // A second try that sees past the cut entries (see
+                // `csg/src/masked.rs`) before the redo in full.
+                let valid = prog.eval_masked((&self.leaves, ctx), root, range, scratch);
+                let f = first_surface(scratch.out.as_slice());
+                let done = valid >= tmax || sure(f, scratch.out.as_slice(), valid, ctx.eps);
+                rothray_csg::counts::masked_try(done);
+                if done {
+                    return f;
+                }
             }
-        };
-        if valid < tmax && (f.is_none() || scratch.out.as_slice().first().is_some_and(unsure)) {
             // Nothing sure before `valid` (a union's entry covered by another
             // operand, a mesh's first span cut away by a difference): redo in
             // full. With meshes, first up to a tenth of the object's size past
