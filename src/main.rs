@@ -582,6 +582,7 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "object_packet_left": st.eval.object_left,
         "masked_tries_sure": st.eval.masked_sure,
         "masked_tries_left": st.eval.masked_left,
+        "full_redos": st.eval.full_redos,
     })
 }
 

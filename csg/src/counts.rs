@@ -21,6 +21,7 @@ thread_local! {
     static OBJ_LEFT: Cell<u64> = const { Cell::new(0) };
     static MASKED_SURE: Cell<u64> = const { Cell::new(0) };
     static MASKED_LEFT: Cell<u64> = const { Cell::new(0) };
+    static FULL_REDOS: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -68,6 +69,9 @@ pub struct EvalCounts {
     pub masked_sure: u64,
     /// Second tries under masks that gave none (the query was redone in full).
     pub masked_left: u64,
+    /// Nearest queries of an object redone in full ([`crate::Mode::All`]):
+    /// neither the first try nor a second one was sure.
+    pub full_redos: u64,
 }
 
 impl EvalCounts {
@@ -88,6 +92,7 @@ impl EvalCounts {
         self.object_left += o.object_left;
         self.masked_sure += o.masked_sure;
         self.masked_left += o.masked_left;
+        self.full_redos += o.full_redos;
     }
 }
 
@@ -166,6 +171,12 @@ pub fn masked_try(sure: bool) {
     }
 }
 
+/// A nearest query redone in full.
+#[inline(always)]
+pub fn full_redo() {
+    bump(&FULL_REDOS)
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -184,5 +195,6 @@ pub fn take_eval_counts() -> EvalCounts {
         object_left: OBJ_LEFT.with(|c| c.replace(0)),
         masked_sure: MASKED_SURE.with(|c| c.replace(0)),
         masked_left: MASKED_LEFT.with(|c| c.replace(0)),
+        full_redos: FULL_REDOS.with(|c| c.replace(0)),
     }
 }

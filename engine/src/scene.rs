@@ -309,6 +309,7 @@ impl RenderScene {
     fn redo(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
         let ObjRef { prog, root, .. } = obj;
         let (tmin, t1, tmax) = range;
+        rothray_csg::counts::full_redo();
         if t1 < tmax {
             prog.eval_in(&self.leaves, root, ctx, (tmin, t1), Mode::All, scratch);
             if let Some((t, s)) = first_surface(scratch.out.as_slice()) {
