@@ -725,10 +725,11 @@ fn cut_onion(rng: &mut rand::rngs::SmallRng, levels: usize) -> Shape {
 
 #[test]
 fn second_tries_under_masks_give_the_full_diagrams_first_surface() {
-    // Nearest hits on cut onions (the second try under masks: a union under
-    // a difference stops where its spans leave the cutters above, not at
-    // its first entry) against the first surface of the full diagram, bit
-    // for bit, and the surface; rays from all around, aimed near the centre.
+    // Nearest hits on cut onions (the try under masks, which such objects
+    // take at once: a union under a difference stops where its spans leave
+    // the cutters above, not at its first entry) against the first surface
+    // of the full diagram, bit for bit, and the surface; rays from all
+    // around, aimed near the centre.
     let (mut sure, mut left, mut rays) = (0, 0, 0);
     for s in 0..160u64 {
         let seed = 0x0a5c_0000 + s;
@@ -747,6 +748,6 @@ fn second_tries_under_masks_give_the_full_diagrams_first_surface() {
         let c = rothray::csg::take_eval_counts();
         (sure, left) = (sure + c.masked_sure, left + c.masked_left);
     }
-    println!("{rays} rays: {sure} second tries under masks sure, {left} redone in full");
+    println!("{rays} rays: {sure} tries under masks sure, {left} redone in full");
     assert!(sure > 30_000, "the onions' cuts should send many rays to the second try");
 }

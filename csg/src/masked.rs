@@ -39,6 +39,15 @@
 //! scenes/nesting at 320x180 took another surface than the full
 //! diagram's).
 //!
+//! An object whose root is such a difference takes this try at once
+//! (`engine/src/scene.rs`, `MASKED_FIRST`): its first try in nearest
+//! mode was mostly unsure (benches/scenes/nesting, sweep_csg: -7.4% and
+//! -7.3% instructions, callgrind 480x270 flat; the check cost scenes
+//! without such objects up to +0.5%: logo +0.48%, fill +0.40%, gear
+//! +0.32%). Other objects take it second, when their first try was not
+//! sure. [`Program::masks_help`] says which: a union must lie under a
+//! difference's positive operand, the only place a mask changes a stop.
+//!
 //! The recursion is bounded ([`MASKED_DEPTH`]): a deeper node is
 //! evaluated in full by the frame path, which has no recursion.
 
@@ -67,34 +76,47 @@ pub(crate) struct MaskLists {
 }
 
 impl Program {
-    /// Does the masked try ([`Program::eval_masked`]) differ from a nearest
-    /// query at `root`? Only where a narrow difference has an inner node as
-    /// its positive operand, reached from the root through narrow unions
-    /// and differences; elsewhere it would repeat the first try.
-    /// (A walk of at most [`HELP_WALK`] nodes, without allocating: it runs
-    /// on every second try; past that it answers yes.)
+    /// Does the masked try ([`Program::eval_masked`]) differ from the full
+    /// redo at `root`? Only where a union (one that is not a small tree or
+    /// wide) lies under a narrow difference's positive operand, reached
+    /// from the root through narrow unions and differences: masks change
+    /// only where unions stop. (A walk of at most [`HELP_WALK`] nodes,
+    /// without allocating; past that it answers yes.)
     pub fn masks_help(&self, root: u32) -> bool {
-        let mut stack = [0u32; HELP_WALK];
-        (stack[0], stack[1]) = (root, 0);
+        if !self.masked_node(root as usize) {
+            return false;
+        }
+        // (node, under a difference's positive operand)
+        let mut stack = [(0u32, false); HELP_WALK];
+        stack[0] = (root, false);
         let mut len = 1;
         let mut seen = 0;
         while len > 0 {
             len -= 1;
-            let n = stack[len] as usize;
+            let (n, under) = stack[len];
+            let n = n as usize;
+            let union = self.kind[n] == NodeKind::Union && self.wide[n] == u32::MAX && !self.small_root(n);
+            if union && under {
+                return true;
+            }
             if !self.masked_node(n) {
                 continue;
             }
             let (first, count) = (self.first[n] as usize, self.count[n] as usize);
-            let ch = &self.children[first..first + count];
-            if self.kind[n] == NodeKind::Difference && self.kind[ch[0] as usize] != NodeKind::Leaf {
-                return true;
-            }
+            // A difference's subtrahends are asked in full: only its
+            // positive operand matters.
+            let (ch, under) = match self.kind[n] {
+                NodeKind::Difference => (&self.children[first..first + 1], true),
+                _ => (&self.children[first..first + count], under),
+            };
             seen += 1;
-            if seen > HELP_WALK || len + count > HELP_WALK {
+            if seen > HELP_WALK || len + ch.len() > HELP_WALK {
                 return true;
             }
-            stack[len..len + count].copy_from_slice(ch);
-            len += count;
+            for &c in ch {
+                stack[len] = (c, under);
+                len += 1;
+            }
         }
         false
     }

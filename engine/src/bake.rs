@@ -526,6 +526,9 @@ pub(crate) const BIG_BAKE: usize = 1 << 16;
 /// The length past an unsure nearest-mode result that an object's full redo
 /// tries first (see `RenderScene::redo_window`).
 pub(crate) fn redo_window_of(program: &Program, leaves: &LeafTable, o: &ObjectInfo) -> f32 {
+    if program.kind[o.root as usize] == rothray_csg::NodeKind::Difference && program.masks_help(o.root) {
+        return crate::scene::MASKED_FIRST;
+    }
     let b = &o.bounds;
     let useful = subtree_has_mesh(program, leaves, o.root) && b.is_finite() && !b.is_empty();
     if useful {

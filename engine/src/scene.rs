@@ -106,7 +106,9 @@ pub struct RenderScene {
     /// evaluation.
     pub(crate) packet_cover: Option<Vec<u32>>,
     /// Per object, the length past an unsure nearest-mode result that its full
-    /// redo tries first (a tenth of its size when it holds a mesh; 0: none).
+    /// redo tries first (a tenth of its size when it holds a mesh; 0: none);
+    /// negative for an object whose nearest queries go to the masked try
+    /// at once ([`MASKED_FIRST`]).
     pub(crate) redo_window: Vec<f32>,
     /// The packet shortcut (see [`Shortcut`]), for scenes with few leaves.
     pub(crate) shortcut: Option<crate::packet::Shortcut>,
@@ -119,6 +121,12 @@ pub struct RenderScene {
 thread_local! {
     static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
+
+/// The redo window ([`RenderScene::redo_window`]) of an object whose root
+/// is a difference that the masked try helps (`Program::masks_help`): its
+/// nearest queries take that try at once, not after a nearest-mode try
+/// that its cut entries would mostly leave unsure.
+pub(crate) const MASKED_FIRST: f32 = -1.0;
 
 /// Is `f`, the first surface of `spans`, a sure nearest answer when
 /// `spans` are exact only up to `valid` (before the range's end)? Not
@@ -274,6 +282,11 @@ impl RenderScene {
     pub(crate) fn object_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
         let ObjRef { prog, root, oi } = obj;
         let (tmin, tmax) = range;
+        // (The kind first: eval_in reads it anyway, and most roots are no
+        // difference, which spares them the load of their window.)
+        if prog.kind[root as usize] == rothray_csg::NodeKind::Difference && self.redo_window[oi as usize] < 0.0 {
+            return self.masked_first(obj, ctx, range, scratch);
+        }
         let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
         if valid < tmax && !sure(f, scratch.out.as_slice(), valid, ctx.eps) {
@@ -299,6 +312,19 @@ impl RenderScene {
             return self.redo(obj, ctx, (tmin, t1, tmax), scratch);
         }
         f
+    }
+
+    #[inline(never)]
+    fn masked_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
+        let ObjRef { prog, root, .. } = obj;
+        let valid = prog.eval_masked((&self.leaves, ctx), root, range, scratch);
+        let f = first_surface(scratch.out.as_slice());
+        let done = valid >= range.1 || sure(f, scratch.out.as_slice(), valid, ctx.eps);
+        rothray_csg::counts::masked_try(done);
+        if done {
+            return f;
+        }
+        self.redo(obj, ctx, (range.0, range.1, range.1), scratch)
     }
 
     /// The first surface of node `root` on `range = (tmin, t1, tmax)` from its full
