@@ -40,7 +40,7 @@
 //! diagram's).
 //!
 //! An object whose root is such a difference takes this try at once
-//! (`engine/src/scene.rs`, `MASKED_FIRST`): its first try in nearest
+//! (`engine/src/scene.rs`, `Retry::masked_first`): its first try in nearest
 //! mode was mostly unsure (benches/scenes/nesting, sweep_csg: -7.4% and
 //! -7.3% instructions, callgrind 480x270 flat; the check cost scenes
 //! without such objects up to +0.5%: logo +0.48%, fill +0.40%, gear

@@ -14,7 +14,7 @@ use crate::components::*;
 use crate::entity_hash::EntitySet;
 use crate::knobs::Knobs;
 use crate::packet::bake_packet_paths;
-use crate::scene::{LeafInfo, ObjectInfo, RenderScene};
+use crate::scene::{LeafInfo, ObjectInfo, RenderScene, Retry};
 
 /// Why a world could not be baked.
 #[derive(Debug, Clone, PartialEq)]
@@ -508,7 +508,7 @@ pub(crate) fn install_baked(scene: &mut RenderScene, baked: Baked) {
     scene.leaf_info = leaf_info;
     build_object_tree(scene);
     bake_packet_paths(scene);
-    scene.redo_window = scene.objects.iter().map(|o| redo_window_of(&scene.program, &scene.leaves, o)).collect();
+    scene.retry = scene.objects.iter().map(|o| retry_of(&scene.program, &scene.leaves, o)).collect();
     let bounds = scene_bounds(scene);
     set_scene_bounds(scene, bounds);
     scene.bake_count += 1;
@@ -523,19 +523,13 @@ pub(crate) fn install_baked(scene: &mut RenderScene, baked: Baked) {
 /// back to the system: trimming costs a few ms.
 pub(crate) const BIG_BAKE: usize = 1 << 16;
 
-/// The length past an unsure nearest-mode result that an object's full redo
-/// tries first (see `RenderScene::redo_window`).
-pub(crate) fn redo_window_of(program: &Program, leaves: &LeafTable, o: &ObjectInfo) -> f32 {
-    if program.kind[o.root as usize] == rothray_csg::NodeKind::Difference && program.masks_help(o.root) {
-        return crate::scene::MASKED_FIRST;
-    }
+/// How an object's unsure nearest queries are tried again (see
+/// [`Retry`]).
+pub(crate) fn retry_of(program: &Program, leaves: &LeafTable, o: &ObjectInfo) -> Retry {
+    let masked_first = program.kind[o.root as usize] == rothray_csg::NodeKind::Difference && program.masks_help(o.root);
     let b = &o.bounds;
     let useful = subtree_has_mesh(program, leaves, o.root) && b.is_finite() && !b.is_empty();
-    if useful {
-        0.1 * b.diagonal_length()
-    } else {
-        0.0
-    }
+    Retry { window: if useful { 0.1 * b.diagonal_length() } else { 0.0 }, masked_first }
 }
 
 /// Builds the objects' tree (binary: tiles cull with it, rays take their

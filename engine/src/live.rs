@@ -24,8 +24,8 @@ use rothray_csg::{Edit, NodeKind};
 use rothray_primitives::{Aabb, LeafKind, LeafTable};
 
 use crate::bake::{
-    bake_objects, build_object_tree, find_objects, install_baked, redo_window_of, scene_bounds, set_scene_bounds, BakeError, BakeSettings,
-    Baked, Slice, BIG_BAKE,
+    bake_objects, build_object_tree, find_objects, install_baked, retry_of, scene_bounds, set_scene_bounds, BakeError, BakeSettings, Baked,
+    Slice, BIG_BAKE,
 };
 use crate::changes::{detect_changes, Changes, Scope, Snapshots};
 use crate::components::Name;
@@ -179,7 +179,7 @@ fn sync_changes(world: &World, scene: &mut RenderScene, live: &mut LiveState, ch
         live.counts.rebuilds += 1;
         build_object_tree(scene);
         link_object_tree(scene, live);
-        scene.redo_window = scene.objects.iter().map(|o| redo_window_of(&scene.program, &scene.leaves, o)).collect();
+        scene.retry = scene.objects.iter().map(|o| retry_of(&scene.program, &scene.leaves, o)).collect();
         live.meshes.rebuild(scene);
     } else {
         let moved = replace_objects(world, scene, live, &baked);
@@ -234,7 +234,7 @@ fn replace_objects(world: &World, scene: &mut RenderScene, live: &mut LiveState,
         let old = live.slices[oi as usize];
         let (info, slice) = rebake_object(world, scene, live, baked, k, oi, Some(old));
         let old_bounds = std::mem::replace(&mut scene.objects[oi as usize], info).bounds;
-        scene.redo_window[oi as usize] = redo_window_of(&scene.program, &scene.leaves, &scene.objects[oi as usize]);
+        scene.retry[oi as usize] = retry_of(&scene.program, &scene.leaves, &scene.objects[oi as usize]);
         if !same_box(&old_bounds, &scene.objects[oi as usize].bounds) {
             moved.push((oi, old_bounds));
         }

@@ -16,11 +16,11 @@ use hecs::{Entity, World};
 use rothray_primitives::Aabb;
 
 use super::{forget_members, rebake_object, refit_object_tree, release_rows, replace_objects, LiveState, FULL_MIN, REBUILD_AT, SWEEP_MIN};
-use crate::bake::{bake_objects, build_object_tree, redo_window_of, BakeError, Baked};
+use crate::bake::{bake_objects, build_object_tree, retry_of, BakeError, Baked};
 use crate::changes::Changes;
 use crate::components::*;
 use crate::entity_hash::EntitySet;
-use crate::scene::{ObjectInfo, RenderScene};
+use crate::scene::{ObjectInfo, RenderScene, Retry};
 
 const NONE: u32 = u32::MAX;
 
@@ -161,7 +161,7 @@ pub(super) fn apply(world: &World, scene: &mut RenderScene, live: &mut LiveState
         let b = info.bounds;
         scene.objects[oi as usize] = info;
         live.slices[oi as usize] = slice;
-        scene.redo_window[oi as usize] = redo_window_of(&scene.program, &scene.leaves, &scene.objects[oi as usize]);
+        scene.retry[oi as usize] = retry_of(&scene.program, &scene.leaves, &scene.objects[oi as usize]);
         live.meshes.update(scene, oi);
         if b.is_empty() {
             continue;
@@ -205,11 +205,11 @@ fn renumber(world: &World, scene: &mut RenderScene, live: &mut LiveState, dead: 
         .collect();
     let old_objects = std::mem::take(&mut scene.objects);
     let old_slices = std::mem::take(&mut live.slices);
-    let old_redo = std::mem::take(&mut scene.redo_window);
+    let old_retry = std::mem::take(&mut scene.retry);
     let n_new = survivors.len() + at.len();
     scene.objects.reserve(n_new);
     live.slices.reserve(n_new);
-    scene.redo_window.reserve(n_new);
+    scene.retry.reserve(n_new);
     let mut map = vec![NONE; n_old];
     let mut old_objects: Vec<Option<ObjectInfo>> = old_objects.into_iter().map(Some).collect();
     let mut k = 0;
@@ -219,7 +219,7 @@ fn renumber(world: &World, scene: &mut RenderScene, live: &mut LiveState, dead: 
         live.index.insert(o.entity, oi);
         scene.objects.push(ObjectInfo { entity: o.entity, name: String::new(), root: 0, bounds: Aabb::EMPTY });
         live.slices.push(born.slices[k]);
-        scene.redo_window.push(0.0);
+        scene.retry.push(Retry::default());
     };
     for (j, &s) in survivors.iter().enumerate() {
         while k < at.len() && at[k] <= j {
@@ -241,7 +241,7 @@ fn renumber(world: &World, scene: &mut RenderScene, live: &mut LiveState, dead: 
         }
         scene.objects.push(o);
         live.slices.push(slice);
-        scene.redo_window.push(old_redo[s as usize]);
+        scene.retry.push(old_retry[s as usize]);
     }
     while k < at.len() {
         place_born(scene, live, k);

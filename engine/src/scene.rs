@@ -105,11 +105,8 @@ pub struct RenderScene {
     /// found all of them empty on its range hits nothing and skips its own
     /// evaluation.
     pub(crate) packet_cover: Option<Vec<u32>>,
-    /// Per object, the length past an unsure nearest-mode result that its full
-    /// redo tries first (a tenth of its size when it holds a mesh; 0: none);
-    /// negative for an object whose nearest queries go to the masked try
-    /// at once ([`MASKED_FIRST`]).
-    pub(crate) redo_window: Vec<f32>,
+    /// Per object, how its unsure nearest queries are tried again.
+    pub(crate) retry: Vec<Retry>,
     /// The packet shortcut (see [`Shortcut`]), for scenes with few leaves.
     pub(crate) shortcut: Option<crate::packet::Shortcut>,
     /// Packet queries go ray by ray (see [`RenderScene::set_ray_by_ray`]).
@@ -122,11 +119,19 @@ thread_local! {
     static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
-/// The redo window ([`RenderScene::redo_window`]) of an object whose root
-/// is a difference that the masked try helps (`Program::masks_help`): its
-/// nearest queries take that try at once, not after a nearest-mode try
-/// that its cut entries would mostly leave unsure.
-pub(crate) const MASKED_FIRST: f32 = -1.0;
+/// How an object's nearest queries go on when the first try is not sure
+/// (made at bake: `bake::retry_of`).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Retry {
+    /// The length past the unsure result that the full redo tries first (a
+    /// tenth of the object's size when it holds a mesh; 0: none).
+    pub window: f32,
+    /// The root is a difference that the masked try helps
+    /// (`Program::masks_help`): its queries take that try at once, not
+    /// after a nearest-mode try that its cut entries would mostly leave
+    /// unsure.
+    pub masked_first: bool,
+}
 
 /// Is `f`, the first surface of `spans`, a sure nearest answer when
 /// `spans` are exact only up to `valid` (before the range's end)? Not
@@ -284,20 +289,16 @@ impl RenderScene {
         let (tmin, tmax) = range;
         // (The kind first: eval_in reads it anyway, and most roots are no
         // difference, which spares them the load of their window.)
-        if prog.kind[root as usize] == rothray_csg::NodeKind::Difference && self.redo_window[oi as usize] < 0.0 {
+        if prog.kind[root as usize] == rothray_csg::NodeKind::Difference && self.retry[oi as usize].masked_first {
             return self.masked_first(obj, ctx, range, scratch);
         }
         let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);
         let f = first_surface(scratch.out.as_slice());
         if valid < tmax && !sure(f, scratch.out.as_slice(), valid, ctx.eps) {
             if prog.masks_help(root) {
-                // A second try that sees past the cut entries (see
-                // `csg/src/masked.rs`) before the redo in full.
-                let valid = prog.eval_masked((&self.leaves, ctx), root, range, scratch);
-                let f = first_surface(scratch.out.as_slice());
-                let done = valid >= tmax || sure(f, scratch.out.as_slice(), valid, ctx.eps);
-                rothray_csg::counts::masked_try(done);
-                if done {
+                // A second try that sees past the cut entries before the
+                // redo in full.
+                if let Some(f) = self.masked_try(obj, ctx, range, scratch) {
                     return f;
                 }
             }
@@ -307,24 +308,30 @@ impl RenderScene {
             // `valid` (their walks then collect only the crossings up to there).
             // Measured on scenes/bunny (callgrind, 480x270): 206.4e6 -> 200.7e6
             // instructions; windows of 0.05-0.25 gave 213e6-204e6.
-            let w = self.redo_window[oi as usize];
+            let w = self.retry[oi as usize].window;
             let t1 = if w > 0.0 { valid + w / ctx.ray.dir.length() } else { tmax };
             return self.redo(obj, ctx, (tmin, t1, tmax), scratch);
         }
         f
     }
 
+    /// [`RenderScene::object_first`] of an object that takes the masked
+    /// try at once ([`Retry::masked_first`]), redone in full when unsure.
+    /// (Out of line: the common path of `object_first` keeps its code.)
     #[inline(never)]
     fn masked_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
+        self.masked_try(obj, ctx, range, scratch).unwrap_or_else(|| self.redo(obj, ctx, (range.0, range.1, range.1), scratch))
+    }
+
+    /// The first surface of object `obj` on `range` from the masked try
+    /// (`csg/src/masked.rs`), when that is sure (`None`: not sure).
+    fn masked_try(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<Option<(f32, Surf)>> {
         let ObjRef { prog, root, .. } = obj;
         let valid = prog.eval_masked((&self.leaves, ctx), root, range, scratch);
         let f = first_surface(scratch.out.as_slice());
         let done = valid >= range.1 || sure(f, scratch.out.as_slice(), valid, ctx.eps);
         rothray_csg::counts::masked_try(done);
-        if done {
-            return f;
-        }
-        self.redo(obj, ctx, (range.0, range.1, range.1), scratch)
+        done.then_some(f)
     }
 
     /// The first surface of node `root` on `range = (tmin, t1, tmax)` from its full
