@@ -46,7 +46,7 @@ pub(crate) struct LeafRecords {
     generation: u32,
     /// Per slot: (leaf, generation, its lanes).
     slots: Vec<(u32, u32, Ranges8)>,
-    /// The rays as given (for the tori's preps).
+    /// The rays as given (for the tile lists' slab tests).
     o: [Vec3; 8],
     d: [Vec3; 8],
     /// Per torus slot: (leaf, generation, its lanes' preps).
@@ -112,11 +112,11 @@ impl PacketMemo {
         out: &mut S,
     ) -> Option<f32> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let LeafRecords { lanes, generation, o, d, tori, .. } = &mut *guard;
+        let LeafRecords { lanes, generation, rays, tori, .. } = &mut *guard;
         if *lanes & (1 << k) == 0 {
             return None;
         }
-        let preps = record(tori, i, *generation, |p| leaves.torus_prep8(i, (o, d), *lanes, p));
+        let preps = record(tori, i, *generation, |p| leaves.torus_prep8(i, rays, *lanes, p));
         counts::leaf_lane(true);
         Some(leaves.torus_spans_prepped(i, preps[k].as_ref(), range, first_only, out))
     }

@@ -456,15 +456,18 @@ pub fn torus_query(o: DVec3, d: DVec3, shape: (f32, f64), ask: TorusAsk, out: &m
 /// What a ring torus's query computes before it looks at the query's range:
 /// the line in the torus's frame, the quartic and its marks (the roots of
 /// its derivative, a cubic). A packet makes it for its eight lanes together
-/// ([`TorusPrep::lanes`]), each step for every lane before the next step,
-/// so that one lane's chain of square roots and divisions overlaps the
-/// next's; each lane's query then finishes from its own prep. The same
-/// numbers as [`torus_query`], which makes and uses it the same way.
+/// in SIMD ([`crate::LeafTable::torus_prep8`], `torus8.rs`), bit for bit
+/// as [`TorusPrep::new`]; each lane's query then finishes from its own
+/// prep. The same numbers as [`torus_query`], which makes and uses it the
+/// same way.
 #[derive(Clone, Copy, Debug)]
 pub struct TorusPrep {
     line: TorusLine,
     c: [f64; 3],
     marks: quartic::Marks,
+    /// The entry of the first negative run, polished, when it is a root
+    /// (a packet's prep polishes its lanes' entries together: `torus8.rs`).
+    entry: Option<f64>,
 }
 
 impl TorusPrep {
@@ -474,31 +477,33 @@ impl TorusPrep {
     pub fn new(o: DVec3, d: DVec3, rho: f64) -> Option<TorusPrep> {
         let line = TorusLine::new(o, d, rho)?;
         let c = line.quartic(rho);
-        Some(TorusPrep { line, c, marks: quartic::Marks::new(&c, line.h) })
+        Some(TorusPrep { line, c, marks: quartic::Marks::new(&c, line.h), entry: None })
     }
 
-    /// [`TorusPrep::new`] for the lines `(o[k], d[k])` of the lanes `k` in
-    /// `lanes` (`None` for the others), step by step over the lanes (the
-    /// steps of one lane depend on each other; the lanes do not). Calling
-    /// `new` per lane instead was 3-5% slower on tori (960x540, one thread,
-    /// best of 9 in six alternating rounds: 0.0684-0.0701 s against
-    /// 0.0716-0.0744 s in five of them).
-    pub fn lanes(o: &[DVec3; 8], d: &[DVec3; 8], rho: f64, lanes: u32, out: &mut [Option<TorusPrep>; 8]) {
-        let mut line: [Option<TorusLine>; 8] = [None; 8];
-        for k in 0..8 {
-            if lanes & (1 << k) != 0 {
-                line[k] = TorusLine::new(o[k], d[k], rho);
-            }
-        }
-        let mut c = [[0.0f64; 3]; 8];
-        for k in 0..8 {
-            if let Some(l) = &line[k] {
-                c[k] = l.quartic(rho);
-            }
-        }
-        for k in 0..8 {
-            out[k] = line[k].map(|l| TorusPrep { line: l, c: c[k], marks: quartic::Marks::new(&c[k], l.h) });
-        }
+    /// A prep made elsewhere the same way (`torus8.rs`: eight lanes at
+    /// once): the line `(dl, dn, tc, oc, h)`, the quartic and its marks.
+    #[inline(always)]
+    pub(crate) fn from_parts((dl, dn, tc, oc, h): (f64, DVec3, f64, DVec3, f64), c: [f64; 3], marks: quartic::Marks) -> TorusPrep {
+        TorusPrep { line: TorusLine { dl, dn, tc, oc, h }, c, marks, entry: None }
+    }
+
+    /// The quartic `[c0, c1, c2]` and its marks.
+    #[inline(always)]
+    pub(crate) fn quartic(&self) -> (&[f64; 3], &quartic::Marks) {
+        (&self.c, &self.marks)
+    }
+
+    /// The polished entry of the first negative run, when known.
+    #[cfg(test)]
+    pub(crate) fn entry(&self) -> Option<f64> {
+        self.entry
+    }
+
+    /// The prep with its first run's entry (`Some`: polished to the
+    /// query's `eps`, exactly as `RunEnd::polish` gives it).
+    #[inline(always)]
+    pub(crate) fn with_entry(self, entry: Option<f64>) -> TorusPrep {
+        TorusPrep { entry, ..self }
     }
 }
 
@@ -542,7 +547,7 @@ pub fn torus_query_prepped(prep: &TorusPrep, shape: (f32, f64), ask: TorusAsk, o
             // skipped and the answer is exact up to where that piece starts
             // (tori: one polish of two per hit; the entry is polished as
             // `polish_pair` would, bit for bit).
-            let x0 = e0.polish(&c, eps);
+            let x0 = polish_entry(prep, k, e0, eps);
             let (t0, lo1) = (line.t(x0), e1.lo());
             let t_lo = line.t(lo1);
             if t0 >= tmin && t0 < tmax && lo1 - x0 > 0.01 * rho && t_lo > t0 {
@@ -560,8 +565,9 @@ pub fn torus_query_prepped(prep: &TorusPrep, shape: (f32, f64), ask: TorusAsk, o
             continue;
         }
         let (x0, x1) = match (need0, need1) {
+            (true, true) if k == 0 && prep.entry.is_some() => (polish_entry(prep, k, e0, eps), e1.polish(&c, eps)),
             (true, true) => quartic::RunEnd::polish_pair(&c, e0, e1, eps),
-            (true, false) => (e0.polish(&c, eps), f64::INFINITY),
+            (true, false) => (polish_entry(prep, k, e0, eps), f64::INFINITY),
             (false, true) => (f64::NEG_INFINITY, e1.polish(&c, eps)),
             (false, false) => (f64::NEG_INFINITY, f64::INFINITY),
         };
@@ -577,6 +583,17 @@ pub fn torus_query_prepped(prep: &TorusPrep, shape: (f32, f64), ask: TorusAsk, o
         }
     }
     (count, f32::INFINITY)
+}
+
+/// Run `k`'s entry `e0`, polished to `eps`: the prep's when `k` is the first
+/// run and the prep has it (the same bits: `polish_pair` gives each root as
+/// `polish` does).
+#[inline(always)]
+fn polish_entry(prep: &TorusPrep, k: usize, e0: quartic::RunEnd, eps: f64) -> f64 {
+    match prep.entry {
+        Some(x) if k == 0 => x,
+        _ => e0.polish(&prep.c, eps),
+    }
 }
 
 /// The spans from every root, the pieces between them classified by their

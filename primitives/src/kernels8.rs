@@ -17,11 +17,12 @@
 
 use glam::{DMat3, DVec3, Vec3};
 
-use crate::kernels::sub;
+use crate::kernels::{sub, TorusPrep};
 use crate::simd8::D8;
 #[cfg(target_arch = "x86_64")]
 use crate::simd8::{avx512_d, avx_d, sse_d};
 use crate::table::{LeafKind, LeafTable};
+use crate::torus8;
 
 /// Per lane, a leaf's unclipped range along the lane's ray (as the scalar
 /// kernel's [`crate::kernels::Range`]), where bit k of `hit` is set.
@@ -57,6 +58,11 @@ impl Rays8Soa {
             o: std::array::from_fn(|a| std::array::from_fn(|k| o[k][a])),
             d: std::array::from_fn(|a| std::array::from_fn(|k| d[k][a])),
         }
+    }
+
+    /// Ray `k`: origin and direction.
+    pub fn lane(&self, k: usize) -> (Vec3, Vec3) {
+        (Vec3::new(self.o[0][k], self.o[1][k], self.o[2][k]), Vec3::new(self.d[0][k], self.d[1][k], self.d[2][k]))
     }
 }
 
@@ -392,6 +398,47 @@ impl LeafTable {
     #[target_feature(enable = "avx")]
     unsafe fn ranges8_avx(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         self.ranges8_in::<avx_d::AvxD>(i, rays, lanes, out)
+    }
+
+    /// [`LeafTable::torus_prep8`] with two AVX registers per value.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    pub(crate) unsafe fn torus_prep8_avx(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut [Option<TorusPrep>; 8]) {
+        self.torus_prep8_in::<avx_d::AvxD>(i, rays, lanes, out)
+    }
+
+    /// [`LeafTable::torus_prep8`] with the SSE2 baseline (also for tests:
+    /// the same preps as the wider builds).
+    #[doc(hidden)]
+    #[cfg(target_arch = "x86_64")]
+    pub fn torus_prep8_sse(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut [Option<TorusPrep>; 8]) {
+        self.torus_prep8_in::<sse_d::SseD>(i, rays, lanes, out)
+    }
+
+    /// [`LeafTable::torus_prep8`] with two AVX registers per value, for
+    /// tests (`false`: the CPU has no AVX).
+    #[doc(hidden)]
+    #[cfg(target_arch = "x86_64")]
+    pub fn torus_prep8_avx2(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut [Option<TorusPrep>; 8]) -> bool {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return false;
+        }
+        // SAFETY: the CPU has AVX.
+        unsafe { self.torus_prep8_avx(i, rays, lanes, out) };
+        true
+    }
+
+    /// The lanes mapped to torus `i`'s frame as `line64` maps them (as
+    /// [`LeafTable::ranges8`]'s quadrics), then [`torus8::torus_prep8_in`].
+    #[inline(always)]
+    fn torus_prep8_in<D: D8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut [Option<TorusPrep>; 8]) {
+        let iu = i as usize;
+        let (m, b) = &self.maps64[self.ext[iu] as usize];
+        let c = Vec3::from(self.anchor[iu]).as_dvec3();
+        let (o, d) = rel_lines::<D>(rays, c);
+        let lo = [map_row(m, 0, &o).add(D::splat(b.x)), map_row(m, 1, &o).add(D::splat(b.y)), map_row(m, 2, &o).add(D::splat(b.z))];
+        let ld = [map_row(m, 0, &d), map_row(m, 1, &d), map_row(m, 2, &d)];
+        torus8::torus_prep8_in(&lo, &ld, (self.p0[iu].x as f64, self.torus_tol), lanes, out);
     }
 
     #[inline(always)]

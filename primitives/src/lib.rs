@@ -37,6 +37,7 @@ mod simd8;
 pub mod sweep;
 pub mod table;
 pub mod table64;
+mod torus8;
 pub mod trim;
 pub mod wide_node;
 

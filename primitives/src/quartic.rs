@@ -34,7 +34,7 @@ fn q_d(c: &[f64; 3], s: f64) -> (f64, f64) {
 /// instructions a call on benches/scenes/tori.json (callgrind), against 125
 /// for `f64::cbrt` (compiler-builtins' software libm).
 #[inline]
-fn cbrt(x: f64) -> f64 {
+pub(crate) fn cbrt(x: f64) -> f64 {
     let ax = x.abs();
     if !(f64::MIN_POSITIVE..f64::INFINITY).contains(&ax) {
         // Zero, subnormal, infinite, NaN: the guess below assumes a normal number.
@@ -184,6 +184,28 @@ impl Marks {
         m
     }
 
+    /// Marks made elsewhere in the same way (`torus8.rs`: eight lanes at once).
+    #[inline(always)]
+    pub(crate) fn from_parts(x: [f64; 5], f: [f64; 5], n: usize) -> Marks {
+        Marks { x, f, n }
+    }
+
+    /// Where the first run of [`negative_runs`] starts (`None`: no run),
+    /// found as that walk finds it, without listing the runs.
+    #[inline(always)]
+    pub(crate) fn first_run_start(&self) -> Option<RunEnd> {
+        for j in 0..self.n - 1 {
+            let (fa, fb) = (self.f[j], self.f[j + 1]);
+            if fa != 0.0 && fb != 0.0 && (fa < 0.0) != (fb < 0.0) {
+                return Some(if fa < 0.0 { RunEnd::Exact(self.x[j]) } else { RunEnd::Root(self.piece(j)) });
+            }
+            if if fa != 0.0 { fa < 0.0 } else { fb < 0.0 } {
+                return Some(RunEnd::Exact(self.x[j]));
+            }
+        }
+        None
+    }
+
     /// The piece from mark `j` to mark `j + 1` as a bracket end pair for
     /// [`seed`]: `(x, q(x), is a critical point)` each.
     #[inline(always)]
@@ -201,6 +223,12 @@ pub(crate) struct Piece {
 }
 
 impl Piece {
+    /// The piece's ends, `(x, q(x), is a critical point)` each.
+    #[inline(always)]
+    pub(crate) fn ends(self) -> ((f64, f64, bool), (f64, f64, bool)) {
+        (self.a, self.b)
+    }
+
     /// The piece's root, polished to `eps` from the seed of [`seed`].
     fn bracket(self, c: &[f64; 3]) -> Bracket {
         Bracket { a: self.a.0, b: self.b.0, neg_at_a: self.a.1 < 0.0, x: seed(c, self.a, self.b) }

@@ -30,10 +30,15 @@ pub(crate) trait D8: Copy {
     fn gt(self, o: Self) -> Self;
     fn eq(self, o: Self) -> Self;
     fn and(self, o: Self) -> Self;
+    fn or(self, o: Self) -> Self;
     /// `!self & o`, bitwise.
     fn andnot(self, o: Self) -> Self;
     fn select(m: Self, a: Self, b: Self) -> Self;
     fn bitmask(self) -> u32;
+    /// Eight f64 lanes as they are.
+    fn load(a: &[f64; 8]) -> Self;
+    /// The lanes as they are.
+    fn store(self) -> [f64; 8];
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -138,6 +143,10 @@ pub(crate) mod sse_d {
             each!(_mm_and_pd, self, o)
         }
         #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            each!(_mm_or_pd, self, o)
+        }
+        #[inline(always)]
         fn andnot(self, o: Self) -> Self {
             each!(_mm_andnot_pd, self, o)
         }
@@ -154,6 +163,18 @@ pub(crate) mod sse_d {
                 m |= (unsafe { _mm_movemask_pd(self.0[h]) } as u32) << (2 * h);
             }
             m
+        }
+        #[inline(always)]
+        fn load(a: &[f64; 8]) -> Self {
+            unsafe { SseD(std::array::from_fn(|h| _mm_loadu_pd(a.as_ptr().add(2 * h)))) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f64; 8] {
+            let mut a = [0.0; 8];
+            for h in 0..4 {
+                unsafe { _mm_storeu_pd(a.as_mut_ptr().add(2 * h), self.0[h]) };
+            }
+            a
         }
     }
 }
@@ -254,6 +275,10 @@ pub(crate) mod avx_d {
             each!(_mm256_and_pd, self, o)
         }
         #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            each!(_mm256_or_pd, self, o)
+        }
+        #[inline(always)]
         fn andnot(self, o: Self) -> Self {
             each!(_mm256_andnot_pd, self, o)
         }
@@ -264,6 +289,19 @@ pub(crate) mod avx_d {
         #[inline(always)]
         fn bitmask(self) -> u32 {
             unsafe { (_mm256_movemask_pd(self.0[0]) | _mm256_movemask_pd(self.0[1]) << 4) as u32 }
+        }
+        #[inline(always)]
+        fn load(a: &[f64; 8]) -> Self {
+            unsafe { AvxD([_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(a.as_ptr().add(4))]) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f64; 8] {
+            let mut a = [0.0; 8];
+            unsafe {
+                _mm256_storeu_pd(a.as_mut_ptr(), self.0[0]);
+                _mm256_storeu_pd(a.as_mut_ptr().add(4), self.0[1]);
+            }
+            a
         }
     }
 }
@@ -370,6 +408,10 @@ pub(crate) mod avx512_d {
             unsafe { pd(_mm512_and_si512(bits(self.0), bits(o.0))) }
         }
         #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            unsafe { pd(_mm512_or_si512(bits(self.0), bits(o.0))) }
+        }
+        #[inline(always)]
         fn andnot(self, o: Self) -> Self {
             unsafe { pd(_mm512_andnot_si512(bits(self.0), bits(o.0))) }
         }
@@ -383,6 +425,16 @@ pub(crate) mod avx512_d {
         #[inline(always)]
         fn bitmask(self) -> u32 {
             unsafe { _mm512_test_epi64_mask(bits(self.0), bits(self.0)) as u32 }
+        }
+        #[inline(always)]
+        fn load(a: &[f64; 8]) -> Self {
+            unsafe { Avx512D(_mm512_loadu_pd(a.as_ptr())) }
+        }
+        #[inline(always)]
+        fn store(self) -> [f64; 8] {
+            let mut a = [0.0; 8];
+            unsafe { _mm512_storeu_pd(a.as_mut_ptr(), self.0) };
+            a
         }
     }
 }
