@@ -583,6 +583,8 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "masked_tries_sure": st.eval.masked_sure,
         "masked_tries_left": st.eval.masked_left,
         "full_redos": st.eval.full_redos,
+        "parallel_mesh_lanes": st.eval.parallel_mesh_lanes,
+        "parallel_mesh_left": st.eval.parallel_mesh_left,
     })
 }
 

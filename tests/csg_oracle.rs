@@ -254,6 +254,83 @@ fn bitten_mesh_packets_match_single_rays() {
     assert!(hits > 10_000 && ps.shortcuts > 10_000 && ps.throughs > 500);
 }
 
+/// Shadow packets as the renderer makes them: the hits of camera packets
+/// moved off their surface (or left on it, or pushed a little inside),
+/// eight at a time with one direction toward a light. Their packet walks
+/// of the meshes (one walk of each mesh's tree for the eight rays,
+/// `MeshData::spans_parallel8`) must leave every ray's any-hit exactly what
+/// the single-ray query gives, in the bitten mesh of the test above and in
+/// random trees with meshes.
+#[test]
+fn shadow_packets_off_meshes_match_single_rays() {
+    use rand::Rng;
+    let seed = 0xc5_9005u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mesh = octa_mesh(DVec3::ZERO, 1.0, 3);
+    let bitten = Shape::Diff(vec![mesh.clone(), Shape::Sphere { c: DVec3::new(0.3, 0.2, 0.6), r: 0.35 }]);
+    let others = [Shape::Sphere { c: DVec3::new(1.4, 0.0, 0.0), r: 0.3 }, Shape::Sphere { c: DVec3::new(0.0, 0.0, -1.6), r: 0.4 }];
+    let _ = rothray::csg::take_eval_counts();
+    let (mut rays, mut blocked) = (0usize, 0usize);
+    for case in 0..40 {
+        let trees = if case == 0 {
+            vec![bitten.clone(), others[0].clone(), others[1].clone()]
+        } else {
+            let mut t = vec![random_tree_with(&mut rng, 3, true)];
+            if case % 3 == 0 {
+                t.push(random_tree_with(&mut rng, 2, true));
+            }
+            t
+        };
+        let scene = bake(&trees);
+        remove_mesh_files(&trees);
+        let mut ps = rothray::engine::PacketScratch::default();
+        for view in 0..if case == 0 { 12 } else { 3 } {
+            let eye = (rp(&mut rng, 1.0).normalize() * rng.gen_range(2.5..5.0)).as_vec3();
+            let cam = rothray::engine::Camera { eye, target: glam::Vec3::ZERO, up: glam::Vec3::Y, fov_y_deg: 50.0 };
+            let cr = cam.rays(64, 48);
+            let light = -(rp(&mut rng, 1.0) + DVec3::new(0.0, -1.5, 0.0)).normalize().as_vec3();
+            let mut origins = Vec::new();
+            for y in 0..48u32 {
+                for x in 0..64u32 {
+                    let ray = cr.ray8(&[x as f32 + 0.5; 8], &[y as f32 + 0.5; 8])[0];
+                    let Some(h) = scene.intersect(&ray) else { continue };
+                    let nf = if h.normal.dot(ray.dir) > 0.0 { -h.normal } else { h.normal };
+                    if nf.dot(light) <= 0.0 && origins.len() % 5 != 0 {
+                        continue; // mostly the surfaces a light reaches
+                    }
+                    let p = ray.origin + ray.dir * h.t;
+                    let off = match origins.len() % 7 {
+                        0 => 0.0,
+                        1 => -1e-5,
+                        _ => 1e-4 * (1.0 + p.abs().max_element()),
+                    };
+                    origins.push(p + nf * off);
+                }
+            }
+            for chunk in origins.chunks_exact(8) {
+                let packet: Vec<rothray::engine::Ray> = chunk.iter().map(|&o| rothray::engine::Ray::new(o, light)).collect();
+                let mut out = [false; 8];
+                scene.occluded_packet(&packet, &mut ps, &mut out, None);
+                for k in 0..8 {
+                    assert_eq!(out[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} view {view} ray {k}: {:?}", packet[k]);
+                    rays += 1;
+                    blocked += out[k] as usize;
+                }
+            }
+        }
+    }
+    let c = rothray::csg::take_eval_counts();
+    println!(
+        "{rays} shadow rays, {blocked} blocked; mesh lanes from the packets' walks {}, left to their own queries {}",
+        c.parallel_mesh_lanes, c.parallel_mesh_left
+    );
+    assert!(
+        rays > 20_000 && blocked > rays / 10 && c.parallel_mesh_lanes > rays as u64 / 4,
+        "too few rays, blocked rays or packet-walked lanes to test"
+    );
+}
+
 #[test]
 fn packet_shortcut_keeps_the_short_span_rule() {
     // Regression (found in review): a grazing ray crosses the mesh over less

@@ -22,6 +22,8 @@ thread_local! {
     static MASKED_SURE: Cell<u64> = const { Cell::new(0) };
     static MASKED_LEFT: Cell<u64> = const { Cell::new(0) };
     static FULL_REDOS: Cell<u64> = const { Cell::new(0) };
+    static PAR_MESH: Cell<u64> = const { Cell::new(0) };
+    static PAR_MESH_LEFT: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -72,6 +74,13 @@ pub struct EvalCounts {
     /// Nearest queries of an object redone in full ([`crate::Mode::All`]):
     /// neither the first try nor a second one was sure.
     pub full_redos: u64,
+    /// Lanes of packets of rays with one direction (shadow rays) whose mesh
+    /// spans came from the packet's one walk of the mesh's tree
+    /// (`MeshData::spans_parallel8`).
+    pub parallel_mesh_lanes: u64,
+    /// Lanes of those packets left to their own mesh queries (the point at
+    /// `tmin` outside the mesh's bounds, the winding rule).
+    pub parallel_mesh_left: u64,
 }
 
 impl EvalCounts {
@@ -93,6 +102,8 @@ impl EvalCounts {
         self.masked_sure += o.masked_sure;
         self.masked_left += o.masked_left;
         self.full_redos += o.full_redos;
+        self.parallel_mesh_lanes += o.parallel_mesh_lanes;
+        self.parallel_mesh_left += o.parallel_mesh_left;
     }
 }
 
@@ -177,6 +188,14 @@ pub fn full_redo() {
     bump(&FULL_REDOS)
 }
 
+/// A packet mesh walked for eight rays with one direction: `done` lanes
+/// got their spans from the walk, `left` are left to their own queries.
+#[inline(always)]
+pub fn parallel_mesh_lanes(done: u32, left: u32) {
+    PAR_MESH.with(|x| x.set(x.get() + done as u64));
+    PAR_MESH_LEFT.with(|x| x.set(x.get() + left as u64));
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -196,5 +215,7 @@ pub fn take_eval_counts() -> EvalCounts {
         masked_sure: MASKED_SURE.with(|c| c.replace(0)),
         masked_left: MASKED_LEFT.with(|c| c.replace(0)),
         full_redos: FULL_REDOS.with(|c| c.replace(0)),
+        parallel_mesh_lanes: PAR_MESH.with(|c| c.replace(0)),
+        parallel_mesh_left: PAR_MESH_LEFT.with(|c| c.replace(0)),
     }
 }

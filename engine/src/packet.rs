@@ -541,9 +541,15 @@ impl RenderScene {
     pub fn occluded_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [bool], tile: Option<&TileView>) {
         let n = rays.len().min(out.len());
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
-        if n == 8 && !self.ray_by_ray && shares_work(tile) && rays.iter().all(plain) {
+        // Rays with one direction (toward a directional light) walk the
+        // packet meshes together.
+        let parallel = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| r.dir == rays[0].dir);
+        if n == 8 && !self.ray_by_ray && (shares_work(tile) || parallel) && rays.iter().all(plain) {
             let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
             ready_memo(&mut ps.memo, &ctx, tile);
+            if parallel {
+                self.walk_meshes_parallel(rays, &mut ps.memo);
+            }
             let settled = self.packet_any(&PacketRays { rays, ctx: &ctx, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), out);
             if settled == 0xff {
                 return;
@@ -561,6 +567,25 @@ impl RenderScene {
             for k in 0..n {
                 out[k] = self.occluded_in(&rays[k], &mut ps.scratch, tile);
             }
+        }
+    }
+
+    /// The spans of the packet meshes for eight rays with one direction,
+    /// recorded in `memo` for the lanes whose own query walks a mesh to its
+    /// box exit (a shadow ray starts inside the mesh's bounds, so its
+    /// nearest query cannot prune): one walk of each mesh's tree for the
+    /// packet ([`LeafTable::mesh_parallel8`]), each lane's spans exactly its
+    /// own walk's.
+    fn walk_meshes_parallel(&self, rays: &[Ray], memo: &mut PacketMemo) {
+        let o: [Vec3; 8] = std::array::from_fn(|k| rays[k].origin);
+        let tmin: [f32; 8] = std::array::from_fn(|k| rays[k].tmin);
+        let tmax: [f32; 8] = std::array::from_fn(|k| rays[k].tmax);
+        for &i in &self.packet_meshes {
+            memo.add(i, &tmin, &tmax, |sp| {
+                let done = self.leaves.mesh_parallel8(i, (&o, rays[0].dir), (&tmin, &tmax), 0xff, sp);
+                rothray_csg::counts::parallel_mesh_lanes(done.count_ones(), 8 - done.count_ones());
+                (done, [f32::INFINITY; 8])
+            });
         }
     }
 

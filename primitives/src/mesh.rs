@@ -1845,6 +1845,10 @@ pub(crate) mod wide;
 #[path = "mesh_selfx.rs"]
 mod selfx;
 
+#[path = "mesh_parallel.rs"]
+mod parallel;
+pub use parallel::ParallelRays8;
+
 #[cfg(test)]
 #[path = "mesh_tests.rs"]
 mod tests;

@@ -970,3 +970,69 @@ fn mesh_grazing_rays_cross_the_right_triangles() {
         );
     }
 }
+
+/// Packets of eight rays with one direction from their own origins (shadow
+/// rays leaving a mesh's surface toward a light) get from one walk of the
+/// tree exactly the spans each ray's own full walk gives (`spans_on`), with
+/// the boxes tested in AVX and lane by lane; lanes whose point at `tmin`
+/// lies outside the bounds are left to their own queries.
+#[test]
+fn mesh_spans_parallel8_match_single_rays() {
+    let seed = 41u64;
+    println!("seed {seed}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let (mut lanes_done, mut spans_seen, mut left) = (0usize, 0usize, 0usize);
+    for (name, (pos, tris)) in [("cube", cube()), ("octasphere(5)", octasphere(5)), ("octasphere(2)", octasphere(2))] {
+        let m = MeshData::new(pos.clone(), tris.clone(), InsideRule::Orientation).unwrap();
+        for i in 0..1500 {
+            // A direction toward the light; origins on and near the surface
+            // (on vertices: rays through edges and vertices), inside, and a
+            // few far outside.
+            let d = if i % 7 == 0 { Vec3::new(0.0, -1.0, 0.0) } else { random_dir(&mut rng) * rng.gen_range(0.5..2.0) };
+            let base = pos[rng.gen_range(0..pos.len())];
+            let o: [Vec3; 8] = std::array::from_fn(|k| match (i + k) % 9 {
+                0 => pos[rng.gen_range(0..pos.len())],
+                1 => Vec3::new(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5)),
+                2 => random_dir(&mut rng).normalize() * 3.0,
+                _ => {
+                    base * rng.gen_range(0.97..1.03)
+                        + Vec3::new(rng.gen_range(-0.05..0.05), rng.gen_range(-0.05..0.05), rng.gen_range(-0.05..0.05))
+                }
+            });
+            let tmin: [f32; 8] = std::array::from_fn(|k| if k == 3 { 0.01 } else { 0.0 });
+            let tmax: [f32; 8] = std::array::from_fn(|k| match k {
+                5 => 0.3,
+                6 => -1.0,
+                _ => f32::INFINITY,
+            });
+            let x: [Line64; 8] = std::array::from_fn(|k| Line64::of(o[k], d));
+            let active = if i % 13 == 0 { 0b1011_0110 } else { 0xff };
+            let q = ParallelRays8 { o: &o, d, tmin: &tmin, tmax: &tmax, x: &x };
+            let mut builds = vec![false];
+            if cfg!(target_arch = "x86_64") && std::arch::is_x86_feature_detected!("avx") {
+                builds.push(true);
+            }
+            for avx in builds {
+                let mut out: [Vec<Span>; 8] = Default::default();
+                let done = m.spans_parallel8_in(&q, (active, avx), 7, &mut out);
+                for k in 0..8 {
+                    let ray = Ray::segment(o[k], d, tmin[k], tmax[k]);
+                    let own_full = active & (1 << k) != 0 && tmax[k] >= tmin[k] && !m.outside_at(o[k], d, tmin[k]);
+                    assert_eq!(done & (1 << k) != 0, own_full, "seed {seed} {name} ray {i} lane {k} (avx {avx}): done mask");
+                    if !own_full {
+                        left += 1;
+                        continue;
+                    }
+                    let mut want: Vec<Span> = Vec::new();
+                    m.spans_on(&ray, x[k], 7, &mut want);
+                    let bits = |v: &[Span]| v.iter().map(|s| (s.t0.to_bits(), s.s0, s.t1.to_bits(), s.s1)).collect::<Vec<_>>();
+                    assert_eq!(bits(&out[k]), bits(&want), "seed {seed} {name} ray {i} lane {k} (avx {avx}): spans differ");
+                    lanes_done += 1;
+                    spans_seen += want.len();
+                }
+            }
+        }
+    }
+    println!("{lanes_done} lanes done, {spans_seen} spans, {left} lanes left to their own queries");
+    assert!(lanes_done > 30_000 && spans_seen > 10_000 && left > 5_000, "too few lanes or spans exercised");
+}

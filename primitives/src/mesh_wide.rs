@@ -246,6 +246,101 @@ impl Ray4 {
     }
 }
 
+/// Eight rays with one direction and their own origins (a packet of shadow
+/// rays toward a directional light), each tested against a node's four
+/// boxes exactly as its own [`Ray4`] tests them: the same operations on the
+/// same values, the lanes in one AVX register per child where the CPU has
+/// AVX, else lane by lane through `Ray4`.
+pub(super) struct ParRays8 {
+    one: [Ray4; 8],
+    /// Origins per axis.
+    o: [[f32; 8]; 3],
+    inv: [f32; 3],
+    near: [usize; 3],
+    zero: bool,
+    avx: bool,
+}
+
+impl ParRays8 {
+    /// The rays `o[k] + t d`, tested with AVX when `avx` (which the CPU
+    /// must have) else lane by lane.
+    pub(super) fn new(o: &[Vec3; 8], d: Vec3, avx: bool) -> ParRays8 {
+        let one: [Ray4; 8] = std::array::from_fn(|k| Ray4::new(o[k], d));
+        ParRays8 {
+            o: std::array::from_fn(|a| std::array::from_fn(|k| o[k][a])),
+            inv: [one[0].inv[0].x, one[0].inv[1].x, one[0].inv[2].x],
+            near: one[0].near,
+            zero: one[0].zero,
+            one,
+            avx,
+        }
+    }
+
+    /// Per child slot of `n`, the lanes of `lanes` whose ray meets it within
+    /// `[tlo[k], thi]` (as [`Ray4::hit`] of each lane says).
+    #[inline(always)]
+    pub(super) fn hit(&self, n: &Node4, tlo: &[f32; 8], thi: f32, lanes: u32) -> [u32; 4] {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx {
+            // SAFETY: the CPU has AVX.
+            return unsafe { self.hit_avx(n, tlo, thi) }.map(|m| m & lanes);
+        }
+        self.hit_lanes(n, tlo, thi, lanes)
+    }
+
+    /// [`ParRays8::hit`] lane by lane (what CPUs without AVX run).
+    #[inline(always)]
+    fn hit_lanes(&self, n: &Node4, tlo: &[f32; 8], thi: f32, lanes: u32) -> [u32; 4] {
+        let mut out = [0u32; 4];
+        let mut m = lanes;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let (c, _) = self.one[k].hit(n, tlo[k], thi);
+            for (s, o) in out.iter_mut().enumerate() {
+                *o |= ((c >> s) & 1) << k;
+            }
+        }
+        out
+    }
+
+    /// [`ParRays8::hit`] with the eight lanes in one AVX register per child.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn hit_avx(&self, n: &Node4, tlo: &[f32; 8], thi: f32) -> [u32; 4] {
+        use std::arch::x86_64::*;
+        let o = [_mm256_loadu_ps(self.o[0].as_ptr()), _mm256_loadu_ps(self.o[1].as_ptr()), _mm256_loadu_ps(self.o[2].as_ptr())];
+        let inv = [_mm256_set1_ps(self.inv[0]), _mm256_set1_ps(self.inv[1]), _mm256_set1_ps(self.inv[2])];
+        let (lo8, hi8) = (_mm256_loadu_ps(tlo.as_ptr()), _mm256_set1_ps(thi));
+        let eps = _mm256_set1_ps(SLAB_EPS);
+        let sign = _mm256_set1_ps(-0.0);
+        let (ninf, inf) = (_mm256_set1_ps(f32::NEG_INFINITY), _mm256_set1_ps(f32::INFINITY));
+        let mut out = [0u32; 4];
+        for (s, o_s) in out.iter_mut().enumerate() {
+            let mut t0 = [_mm256_setzero_ps(); 3];
+            let mut t1 = [_mm256_setzero_ps(); 3];
+            for a in 0..3 {
+                let near = _mm256_set1_ps(n.b[2 * a + self.near[a]][s]);
+                let far = _mm256_set1_ps(n.b[2 * a + 1 - self.near[a]][s]);
+                t0[a] = _mm256_mul_ps(_mm256_sub_ps(near, o[a]), inv[a]);
+                t1[a] = _mm256_mul_ps(_mm256_sub_ps(far, o[a]), inv[a]);
+                if self.zero {
+                    // As `Vec4::select(is_nan_mask, ..)`.
+                    t0[a] = _mm256_blendv_ps(t0[a], ninf, _mm256_cmp_ps::<_CMP_UNORD_Q>(t0[a], t0[a]));
+                    t1[a] = _mm256_blendv_ps(t1[a], inf, _mm256_cmp_ps::<_CMP_UNORD_Q>(t1[a], t1[a]));
+                }
+            }
+            // `Vec4::max` / `min` are `_mm_max_ps` / `_mm_min_ps` in this order.
+            let lo = _mm256_max_ps(_mm256_max_ps(_mm256_max_ps(t0[0], t0[1]), t0[2]), lo8);
+            let hi = _mm256_min_ps(_mm256_min_ps(_mm256_min_ps(t1[0], t1[1]), t1[2]), hi8);
+            let a = _mm256_sub_ps(lo, _mm256_mul_ps(_mm256_andnot_ps(sign, lo), eps));
+            let b = _mm256_add_ps(hi, _mm256_mul_ps(_mm256_andnot_ps(sign, hi), eps));
+            *o_s = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(a, b)) as u32;
+        }
+        out
+    }
+}
+
 /// Per-ray constants of the 4-wide watertight test.
 #[derive(Clone, Copy)]
 pub(super) struct TriRay4 {

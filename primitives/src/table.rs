@@ -9,7 +9,7 @@ use crate::{
     gcyl::GenCylData,
     kernels,
     kernels8::Rays8Soa,
-    mesh::{Line64, MeshData, NearestRays8},
+    mesh::{Line64, MeshData, NearestRays8, ParallelRays8},
     ray::{scale_t, ScaledSink},
     sweep::SweptSphereData,
     Ray, Span, SpanSink, Surf,
@@ -1059,6 +1059,37 @@ impl LeafTable {
         let active = (0..8).filter(|&k| Ray::dir_rescale(dl[k]).is_none()).fold(0, |a, k| a | (1 << k)) & active;
         let local = NearestRays8 { o: xo.as_vec3(), d: &dl, exact: Some((xo, &xd)), ..*q };
         self.meshes[self.ext[iu] as usize].spans_nearest8(&local, active, i, out)
+    }
+
+    /// The spans of mesh leaf `i` for eight world rays with one direction
+    /// `d` and their own origins `o[k]` on `[tmin[k], tmax[k]]` (a packet of
+    /// shadow rays toward a directional light): the lanes of `active` whose
+    /// own query walks the mesh to its box exit get exactly its spans, in
+    /// one walk of the tree ([`MeshData::spans_parallel8`]). Returns those
+    /// lanes; the others are left to `spans_for`.
+    pub fn mesh_parallel8(
+        &self,
+        i: u32,
+        (o, d): (&[Vec3; 8], Vec3),
+        (tmin, tmax): (&[f32; 8], &[f32; 8]),
+        active: u32,
+        out: &mut [Vec<Span>; 8],
+    ) -> u32 {
+        let iu = i as usize;
+        if self.kind[iu] != LeafKind::Mesh {
+            return 0;
+        }
+        // The rays' lines through the f64 map (as `mesh_spans`): one local
+        // direction for all.
+        let lines: [(Vec3, Vec3, Line64); 8] = std::array::from_fn(|k| self.mesh_line(iu, o[k], d));
+        let ld = lines[0].1;
+        if Ray::dir_rescale(ld).is_some() {
+            return 0;
+        }
+        let lo: [Vec3; 8] = std::array::from_fn(|k| lines[k].0);
+        let x: [Line64; 8] = std::array::from_fn(|k| lines[k].2);
+        let q = ParallelRays8 { o: &lo, d: ld, tmin, tmax, x: &x };
+        self.meshes[self.ext[iu] as usize].spans_parallel8(&q, active, i, out)
     }
 
     /// Is the world point inside leaf `i` (boundary included)?
