@@ -493,6 +493,12 @@ impl TorusPrep {
         (&self.c, &self.marks)
     }
 
+    /// Where the line's `t = 0` lies in the quartic's `s`.
+    #[inline(always)]
+    pub(crate) fn line_start(&self) -> f64 {
+        -self.line.tc
+    }
+
     /// The polished entry of the first negative run, when known.
     #[cfg(test)]
     pub(crate) fn entry(&self) -> Option<f64> {

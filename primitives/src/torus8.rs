@@ -185,10 +185,12 @@ pub(crate) fn torus_prep8_in<D: D8>(o: &[D; 3], d: &[D; 3], (rho, tol): (f64, f6
 /// `eps` for all those lanes together: the root a nearest query polishes
 /// first, and alone (lane by lane its Newton steps were a chain of
 /// dependent divisions, a fifth of tori's time); the same bits as
-/// `RunEnd::polish` ([`refine8`]). (Taking instead the first run that may
-/// reach the line's `t = 0`, for shadow rays leaving a run behind them,
-/// made tori trace 3-4% slower flat and no faster lit, whether every
-/// lane's runs were listed or walked only that far.)
+/// `RunEnd::polish` ([`refine8`]). An entry whose piece lies wholly before
+/// the line's `t = 0` is left out: a range starting there or later does
+/// not polish it (a shadow ray leaving the run it starts on). (Taking
+/// instead the first run that may reach `t = 0` made tori trace 3-4%
+/// slower flat and no faster lit, whether every lane's runs were listed or
+/// walked only that far.)
 #[inline(always)]
 fn polish_entries<D: D8>(c: &[[f64; 8]; 3], eps: f64, out: &mut [Option<TorusPrep>; 8]) {
     let (mut a, mut b) = (Ends::default(), Ends::default());
@@ -197,6 +199,9 @@ fn polish_entries<D: D8>(c: &[[f64; 8]; 3], eps: f64, out: &mut [Option<TorusPre
         let Some(p) = p else { continue };
         if let Some(RunEnd::Root(piece)) = p.quartic().1.first_run_start() {
             let (pa, pb) = piece.ends();
+            if pb.0 < p.line_start() {
+                continue;
+            }
             a.set(k, pa);
             b.set(k, pb);
             lanes |= 1 << k;

@@ -21,7 +21,8 @@ fn first_entry(p: &TorusPrep, eps: f64) -> Option<f64> {
     let mut runs = [(RunEnd::Exact(0.0), RunEnd::Exact(0.0)); 3];
     let n = negative_runs(p.quartic().1, &mut runs);
     match runs[0].0 {
-        RunEnd::Root(_) if n > 0 => Some(runs[0].0.polish(p.quartic().0, eps)),
+        // (Not where its piece lies wholly before the line's t = 0.)
+        RunEnd::Root(_) if n > 0 && runs[0].0.hi() >= p.line_start() => Some(runs[0].0.polish(p.quartic().0, eps)),
         _ => None,
     }
 }
