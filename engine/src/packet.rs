@@ -543,7 +543,9 @@ impl RenderScene {
         let plain = |r: &Ray| r.is_valid() && Ray::dir_rescale(r.dir).is_none();
         // Rays with one direction (toward a directional light) walk the
         // packet meshes together.
-        let parallel = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| r.dir == rays[0].dir);
+        // (Bits, not values: -0 and +0 components would set up other walks.)
+        let dir_bits = |r: &Ray| r.dir.to_array().map(f32::to_bits);
+        let parallel = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| dir_bits(r) == dir_bits(&rays[0]));
         if n == 8 && !self.ray_by_ray && (shares_work(tile) || parallel) && rays.iter().all(plain) {
             let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
             ready_memo(&mut ps.memo, &ctx, tile);

@@ -104,8 +104,13 @@ fn step(c: &[f64; 3], br: &mut Bracket, eps: f64) -> Option<f64> {
 }
 
 /// [`step`] to the end (at most 100 steps).
-fn refine(c: &[f64; 3], mut br: Bracket, eps: f64) -> f64 {
-    for _ in 0..100 {
+fn refine(c: &[f64; 3], br: Bracket, eps: f64) -> f64 {
+    refine_n(c, br, eps, 100)
+}
+
+/// [`step`] to the end, at most `n` steps.
+fn refine_n(c: &[f64; 3], mut br: Bracket, eps: f64, n: usize) -> f64 {
+    for _ in 0..n {
         if let Some(r) = step(c, &mut br, eps) {
             return r;
         }
@@ -117,13 +122,14 @@ fn refine(c: &[f64; 3], mut br: Bracket, eps: f64) -> f64 {
 /// is a chain of dependent multiplies and a division, so two independent
 /// chains cost about as much as one (the common ray meets the tube twice, a
 /// root on each side of the one minimum). Each root is exactly what `refine`
-/// gives.
+/// gives (the one left running keeps what is left of its 100 steps: the
+/// packet's polish of a first entry, `torus8.rs`, is a lone `refine`).
 fn refine_pair(c: &[f64; 3], mut b0: Bracket, mut b1: Bracket, eps: f64) -> (f64, f64) {
-    for _ in 0..100 {
+    for i in 0..100 {
         match (step(c, &mut b0, eps), step(c, &mut b1, eps)) {
             (Some(r0), Some(r1)) => return (r0, r1),
-            (Some(r0), None) => return (r0, refine(c, b1, eps)),
-            (None, Some(r1)) => return (refine(c, b0, eps), r1),
+            (Some(r0), None) => return (r0, refine_n(c, b1, eps, 99 - i)),
+            (None, Some(r1)) => return (refine_n(c, b0, eps, 99 - i), r1),
             (None, None) => {}
         }
     }
