@@ -252,12 +252,10 @@ impl Ray4 {
 /// same values, the lanes in one AVX register per child where the CPU has
 /// AVX, else lane by lane through `Ray4`.
 pub(super) struct ParRays8 {
+    /// Each lane's own test (the direction's constants are lane 0's).
     one: [Ray4; 8],
     /// Origins per axis.
     o: [[f32; 8]; 3],
-    inv: [f32; 3],
-    near: [usize; 3],
-    zero: bool,
     avx: bool,
 }
 
@@ -266,14 +264,7 @@ impl ParRays8 {
     /// must have) else lane by lane.
     pub(super) fn new(o: &[Vec3; 8], d: Vec3, avx: bool) -> ParRays8 {
         let one: [Ray4; 8] = std::array::from_fn(|k| Ray4::new(o[k], d));
-        ParRays8 {
-            o: std::array::from_fn(|a| std::array::from_fn(|k| o[k][a])),
-            inv: [one[0].inv[0].x, one[0].inv[1].x, one[0].inv[2].x],
-            near: one[0].near,
-            zero: one[0].zero,
-            one,
-            avx,
-        }
+        ParRays8 { o: std::array::from_fn(|a| std::array::from_fn(|k| o[k][a])), one, avx }
     }
 
     /// Per child slot of `n`, the lanes of `lanes` whose ray meets it within
@@ -310,7 +301,8 @@ impl ParRays8 {
     unsafe fn hit_avx(&self, n: &Node4, tlo: &[f32; 8], thi: f32) -> [u32; 4] {
         use std::arch::x86_64::*;
         let o = [_mm256_loadu_ps(self.o[0].as_ptr()), _mm256_loadu_ps(self.o[1].as_ptr()), _mm256_loadu_ps(self.o[2].as_ptr())];
-        let inv = [_mm256_set1_ps(self.inv[0]), _mm256_set1_ps(self.inv[1]), _mm256_set1_ps(self.inv[2])];
+        let Ray4 { inv, near: near_of, zero, .. } = self.one[0];
+        let inv = [_mm256_set1_ps(inv[0].x), _mm256_set1_ps(inv[1].x), _mm256_set1_ps(inv[2].x)];
         let (lo8, hi8) = (_mm256_loadu_ps(tlo.as_ptr()), _mm256_set1_ps(thi));
         let eps = _mm256_set1_ps(SLAB_EPS);
         let sign = _mm256_set1_ps(-0.0);
@@ -320,11 +312,11 @@ impl ParRays8 {
             let mut t0 = [_mm256_setzero_ps(); 3];
             let mut t1 = [_mm256_setzero_ps(); 3];
             for a in 0..3 {
-                let near = _mm256_set1_ps(n.b[2 * a + self.near[a]][s]);
-                let far = _mm256_set1_ps(n.b[2 * a + 1 - self.near[a]][s]);
+                let near = _mm256_set1_ps(n.b[2 * a + near_of[a]][s]);
+                let far = _mm256_set1_ps(n.b[2 * a + 1 - near_of[a]][s]);
                 t0[a] = _mm256_mul_ps(_mm256_sub_ps(near, o[a]), inv[a]);
                 t1[a] = _mm256_mul_ps(_mm256_sub_ps(far, o[a]), inv[a]);
-                if self.zero {
+                if zero {
                     // As `Vec4::select(is_nan_mask, ..)`.
                     t0[a] = _mm256_blendv_ps(t0[a], ninf, _mm256_cmp_ps::<_CMP_UNORD_Q>(t0[a], t0[a]));
                     t1[a] = _mm256_blendv_ps(t1[a], inf, _mm256_cmp_ps::<_CMP_UNORD_Q>(t1[a], t1[a]));

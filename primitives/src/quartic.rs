@@ -197,7 +197,11 @@ impl Marks {
     }
 
     /// Where the first run of [`negative_runs`] starts (`None`: no run),
-    /// found as that walk finds it, without listing the runs.
+    /// found as that walk finds it, without listing the runs. (The sign
+    /// rules are written twice: one helper giving both walks each piece's
+    /// sign changes cost tori 2.8% instructions, callgrind 480x270, in the
+    /// hot `negative_runs`; `packet_torus_preps_match_the_scalar_prep_bit_for_bit`
+    /// checks the two agree.)
     #[inline(always)]
     pub(crate) fn first_run_start(&self) -> Option<RunEnd> {
         for j in 0..self.n - 1 {
