@@ -123,6 +123,11 @@ pub(crate) fn wide_child() {
 }
 
 #[inline(always)]
+pub(crate) fn wide_children(n: u32) {
+    WIDE.with(|x| x.set(x.get() + n as u64));
+}
+
+#[inline(always)]
 pub(crate) fn early_out() {
     bump(&EARLY);
 }

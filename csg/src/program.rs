@@ -1358,6 +1358,8 @@ mod masked;
 pub mod object_packet;
 #[path = "small_first.rs"]
 mod small_first;
+#[path = "small_first8.rs"]
+mod small_first8;
 #[path = "small_tree.rs"]
 pub(crate) mod small_tree;
 use small_tree::SmallLists;

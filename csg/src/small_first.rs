@@ -98,6 +98,17 @@ pub(crate) enum SmallFirst {
 #[inline(always)]
 pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
     debug_assert!(E == 2 * N);
+    // An intersection with an operand the line misses, or a difference
+    // whose positive operand it misses, is empty on the whole line.
+    let missed = |j: usize| ops.r[j].hit & (1 << k) == 0;
+    let empty = match ops.kind {
+        NodeKind::Intersection => (0..ops.count).any(missed),
+        NodeKind::Difference => missed(0),
+        _ => false,
+    };
+    if empty {
+        return SmallFirst::Empty;
+    }
     // Boundaries (place, operand, exit) past lo - 2 eps, and which operands
     // the range starts inside.
     let mut ev = [(0.0f32, 0usize, false); E];

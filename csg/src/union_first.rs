@@ -47,6 +47,7 @@ use rothray_primitives::{
 };
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
+use super::small_first8::{small_first8, First8, Ranges};
 use super::{NodeKind, PacketMemo, Program};
 use crate::counts;
 
@@ -305,9 +306,57 @@ impl FirstWalk<'_> {
     #[inline(never)]
     fn take_small(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
         if self.prog.count[c] == 2 {
-            self.take_small_n::<2, 4>(c, m, tbox)
+            self.take_small2(c, m, tbox)
         } else {
             self.take_small_n::<SMALL_OPS, { 2 * SMALL_OPS }>(c, m, tbox)
+        }
+    }
+
+    /// [`FirstWalk::take_small`] for two operands: all lanes at once
+    /// ([`small_first8`]), a lane with a NaN end as `take_small_n`'s.
+    #[inline(always)]
+    fn take_small2(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
+        let (prog, memo, leaves) = (self.prog, self.memo, self.leaves);
+        let mut ops = SmallOps::<2>::of(prog, c);
+        ops.gather(prog, c, |leaf| Some(memo.with_solve(leaves, leaf, |r| *r).unwrap_or_else(|| self.solve_here(leaf))));
+        let lanes = m & ops.done;
+        // A lane that a solve left undone goes the walk's way.
+        self.live &= !(m & !lanes);
+        counts::wide_children(lanes.count_ones());
+        let f = small_first8(&ops, lanes, &Ranges { lo: &self.tmin, hi: &self.tmax, eps: &self.eps });
+        self.live &= !f.kill;
+        self.put8(&f, tbox);
+        let mut odd = f.odd;
+        while odd != 0 {
+            let k = odd.trailing_zeros() as usize;
+            odd &= odd - 1;
+            self.take_small_lane::<2, 4>(&ops, k, tbox);
+        }
+    }
+
+    /// [`FirstWalk::put`] of the spans of `f` on its lanes `f.span`, and
+    /// its bounds `f.next` on every lane, without a branch per lane.
+    #[inline(always)]
+    fn put8(&mut self, f: &First8, tbox: &[f32; 8]) {
+        let min = |x: f32, y: f32| if y < x { y } else { x };
+        for k in 0..8 {
+            let p = f.span & (1 << k) != 0;
+            let repl = p & (f.t0[k] < self.a[k]);
+            let lost = if repl {
+                self.a[k]
+            } else if p {
+                f.t0[k]
+            } else {
+                f32::INFINITY
+            };
+            self.second[k] = min(min(self.second[k], lost), f.next[k]);
+            self.a[k] = if repl { f.t0[k] } else { self.a[k] };
+            self.b[k] = if repl { f.t1[k] } else { self.b[k] };
+            self.s0[k] = if repl { f.s0[k] } else { self.s0[k] };
+            self.s1[k] = if repl { f.s1[k] } else { self.s1[k] };
+            self.boxt[k] = if repl { tbox[k] } else { self.boxt[k] };
+            let r = f.t0[k] + PRUNE * self.eps[k];
+            self.reach[k] = if repl { min(self.reach[k], r) } else { self.reach[k] };
         }
     }
 
@@ -324,32 +373,38 @@ impl FirstWalk<'_> {
             let k = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             counts::wide_child();
-            let (lo, hi) = (self.tmin[k], self.tmax[k]);
-            let first = match small_first::<N, E>(&ops, k, (lo, self.eps[k])) {
-                // A span no longer than 8 eps: the lane's cut at `v` might
-                // not reach past its exit (see `small_first`).
-                SmallFirst::Span { t: (t0, t1), .. } if !(t1 - t0 > 8.0 * self.eps[k]) => SmallFirst::From(t0),
-                f => f,
-            };
-            match first {
-                SmallFirst::Empty => {}
-                SmallFirst::Inside => self.live &= !(1 << k),
-                SmallFirst::From(t) => {
-                    if t < lo {
-                        self.live &= !(1 << k);
-                    } else {
-                        self.second[k] = self.second[k].min(t);
-                    }
+            self.take_small_lane::<N, E>(&ops, k, tbox);
+        }
+    }
+
+    /// Lane `k` of [`FirstWalk::take_small_n`].
+    #[inline(always)]
+    fn take_small_lane<const N: usize, const E: usize>(&mut self, ops: &SmallOps<N>, k: usize, tbox: &[f32; 8]) {
+        let (lo, hi) = (self.tmin[k], self.tmax[k]);
+        let first = match small_first::<N, E>(ops, k, (lo, self.eps[k])) {
+            // A span no longer than 8 eps: the lane's cut at `v` might
+            // not reach past its exit (see `small_first`).
+            SmallFirst::Span { t: (t0, t1), .. } if !(t1 - t0 > 8.0 * self.eps[k]) => SmallFirst::From(t0),
+            f => f,
+        };
+        match first {
+            SmallFirst::Empty => {}
+            SmallFirst::Inside => self.live &= !(1 << k),
+            SmallFirst::From(t) => {
+                if t < lo {
+                    self.live &= !(1 << k);
+                } else {
+                    self.second[k] = self.second[k].min(t);
                 }
-                SmallFirst::Span { t: (t0, t1), s: (s0, s1), next } => {
-                    if t0 >= hi {
-                        continue;
-                    }
-                    let real1 = t1 <= hi && t1.is_finite();
-                    let c1 = if real1 { t1 } else { t1.min(hi) };
-                    self.put(k, (t0, c1), (s0, if real1 { s1 } else { Surf::NONE }), tbox[k]);
-                    self.second[k] = self.second[k].min(next);
+            }
+            SmallFirst::Span { t: (t0, t1), s: (s0, s1), next } => {
+                if t0 >= hi {
+                    return;
                 }
+                let real1 = t1 <= hi && t1.is_finite();
+                let c1 = if real1 { t1 } else { t1.min(hi) };
+                self.put(k, (t0, c1), (s0, if real1 { s1 } else { Surf::NONE }), tbox[k]);
+                self.second[k] = self.second[k].min(next);
             }
         }
     }
