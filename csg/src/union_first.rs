@@ -246,8 +246,25 @@ impl FirstWalk<'_> {
     #[inline(never)]
     fn solve_pending(&mut self) {
         let mut pending = std::mem::take(self.pending);
-        pending.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
-        for &(_, pos, m, tbox) in pending.iter() {
+        // Nearest first: the entries' keys sorted with their places, eight
+        // bytes each, instead of the 44-byte entries (that sort was 3.6% of
+        // scenes/forest's cycles, perf, one thread, 1920x1080 flat). Ties
+        // stay in the order met, as `sort_unstable_by` kept them up to its
+        // small-sort length: a settled lane's answer does not depend on the
+        // order anyway (see the module's notes).
+        let mut order = [0u64; SORT_MAX];
+        let n = pending.len();
+        if n <= SORT_MAX {
+            for (i, p) in pending.iter().enumerate() {
+                order[i] = (sort_key(p.0) as u64) << 32 | i as u64;
+            }
+            order[..n].sort_unstable();
+        } else {
+            pending.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+        }
+        for i in 0..n {
+            let at = if n <= SORT_MAX { order[i] as u32 as usize } else { i };
+            let (_, pos, m, tbox) = pending[at];
             let mut m = m & self.live;
             for k in 0..8 {
                 m &= if tbox[k] <= self.reach[k] { u32::MAX } else { !(1 << k) };
@@ -428,5 +445,43 @@ impl FirstWalk<'_> {
     }
 }
 
+/// The most children met between two settles whose keys are sorted on the
+/// stack (more: the entries themselves are sorted).
+const SORT_MAX: usize = 64;
+
+/// `x` as an integer in [`f32::total_cmp`]'s order.
+#[inline(always)]
+fn sort_key(x: f32) -> u32 {
+    let b = x.to_bits();
+    // Negative values: all bits but the sign flipped (so larger magnitudes
+    // sort lower); then the sign bit flipped so negatives sort first.
+    (b ^ ((((b as i32) >> 31) as u32) >> 1)) ^ 0x8000_0000
+}
+
 /// The most operands of a child that [`FirstWalk::take_small`] takes.
 pub(crate) const SMALL_OPS: usize = 4;
+
+#[cfg(test)]
+mod tests {
+    use super::sort_key;
+
+    /// `sort_key` orders as `f32::total_cmp` (zeros, infinities, subnormals,
+    /// NaNs of both signs included).
+    #[test]
+    fn sort_keys_order_as_total_cmp() {
+        let mut xs =
+            vec![0.0f32, -0.0, 1.0, -1.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, -f32::NAN, 1e-45, -1e-45, f32::MAX, f32::MIN];
+        let mut s = 0x9e3779b9u32;
+        for _ in 0..2000 {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            xs.push(f32::from_bits(s));
+        }
+        for &a in &xs {
+            for &b in xs.iter().step_by(7) {
+                assert_eq!(sort_key(a).cmp(&sort_key(b)), a.total_cmp(&b), "{a:e} ({:#x}) against {b:e} ({:#x})", a.to_bits(), b.to_bits());
+            }
+        }
+    }
+}
