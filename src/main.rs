@@ -360,7 +360,8 @@ fn run(cli: Cli) -> Result<()> {
                 // The bytes whose hash the part records (read again: the loader
                 // does not keep them).
                 let bytes = std::fs::read(&scene).map_err(|e| BadInput(format!("{}: cannot read: {e}", scene.display())))?;
-                let prog = Progress::start(s.part.rows(s.height as usize, rothray_engine::tile_size().1).len(), "render part");
+                let prog =
+                    Progress::start(s.part.rows(s.height as usize, rothray_engine::tile_size_for(&rs, s.part).1).len(), "render part");
                 let done = prog.done.clone();
                 let px = render_raw(&rs, &sf.camera, &s, &|d, _| {
                     done.fetch_max(d, Ordering::Relaxed);

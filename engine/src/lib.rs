@@ -55,8 +55,8 @@ pub use knobs::{Knob, Knobs};
 pub use packet::{PacketScratch, PACKET_MESHES};
 pub use part::{Part, Split};
 pub use render::{
-    encode_depth, encode_pixel, encode_srgb, leaf_id_color, render, render_raw, tile_size, Aov, Camera, CameraRays, Light, RawPixels,
-    RenderSettings, RenderStats,
+    encode_depth, encode_pixel, encode_srgb, leaf_id_color, render, render_raw, tile_size, tile_size_for, Aov, Camera, CameraRays, Light,
+    RawPixels, RenderSettings, RenderStats,
 };
 pub use rothray_csg as csg;
 pub use rothray_primitives as primitives;
