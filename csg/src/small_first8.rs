@@ -71,11 +71,25 @@ pub(crate) struct Ranges<'a> {
     pub(crate) eps: &'a [f32; 8],
 }
 
-/// The answers of the two-operand node whose operands' solves are `ops`
-/// (`ops.count == 2`, an intersection or difference) for the lanes `lanes`
-/// (done by both solves) on `ranges`.
-pub(crate) fn small_first8(ops: &SmallOps<2>, lanes: u32, ranges: &Ranges) -> First8 {
-    debug_assert!(ops.count == 2 && matches!(ops.kind, NodeKind::Intersection | NodeKind::Difference));
+/// A two-operand node's kind, leaves and their solves.
+#[derive(Clone, Copy)]
+pub(crate) struct Two<'a> {
+    pub(crate) kind: NodeKind,
+    pub(crate) leaf: [u32; 2],
+    pub(crate) r: [&'a Ranges8; 2],
+}
+
+impl<'a> Two<'a> {
+    /// The node of `ops` (two operands).
+    pub(crate) fn of(ops: &'a SmallOps<2>) -> Self {
+        Two { kind: ops.kind, leaf: ops.leaf, r: [&ops.r[0], &ops.r[1]] }
+    }
+}
+
+/// The answers of the two-operand node `ops` (an intersection or
+/// difference) for the lanes `lanes` (done by both solves) on `ranges`.
+pub(crate) fn small_first8(ops: &Two, lanes: u32, ranges: &Ranges) -> First8 {
+    debug_assert!(matches!(ops.kind, NodeKind::Intersection | NodeKind::Difference));
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2.
@@ -88,22 +102,22 @@ pub(crate) fn small_first8(ops: &SmallOps<2>, lanes: u32, ranges: &Ranges) -> Fi
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[doc(hidden)]
-pub(crate) unsafe fn small_first8_avx2(ops: &SmallOps<2>, lanes: u32, ranges: &Ranges) -> First8 {
+pub(crate) unsafe fn small_first8_avx2(ops: &Two, lanes: u32, ranges: &Ranges) -> First8 {
     lanes8(ops, lanes, ranges)
 }
 
 /// [`small_first8`] for the baseline (SSE2: the lane loop in two halves).
 #[doc(hidden)]
-pub(crate) fn small_first8_base(ops: &SmallOps<2>, lanes: u32, ranges: &Ranges) -> First8 {
+pub(crate) fn small_first8_base(ops: &Two, lanes: u32, ranges: &Ranges) -> First8 {
     lanes8(ops, lanes, ranges)
 }
 
 /// Both builds' body: a loop over the lanes without a branch, for the
 /// compiler to vectorise (selects, compares, min and max; no calls).
 #[inline(always)]
-fn lanes8(ops: &SmallOps<2>, lanes: u32, ranges: &Ranges) -> First8 {
+fn lanes8(ops: &Two, lanes: u32, ranges: &Ranges) -> First8 {
     let inter = ops.kind == NodeKind::Intersection;
-    let (r0, r1): (&Ranges8, &Ranges8) = (&ops.r[0], &ops.r[1]);
+    let (r0, r1): (&Ranges8, &Ranges8) = (ops.r[0], ops.r[1]);
     // The lanes whose result may not be empty on the whole line (see
     // `small_first`: an intersection needs both operands, a difference its
     // first). Packets of coherent rays often have none.

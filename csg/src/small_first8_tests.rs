@@ -73,11 +73,12 @@ fn small_first8_matches_small_first_lane_by_lane() {
         }
         let lanes = rng.gen::<u32>() & 0xff;
         let ranges = Ranges { lo: &lo, hi: &hi, eps: &eps };
-        let mut builds = vec![("base", small_first8_base(&ops, lanes, &ranges))];
+        let two = Two::of(&ops);
+        let mut builds = vec![("base", small_first8_base(&two, lanes, &ranges))];
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2.
-            builds.push(("avx2", unsafe { small_first8_avx2(&ops, lanes, &ranges) }));
+            builds.push(("avx2", unsafe { small_first8_avx2(&two, lanes, &ranges) }));
         }
         for (name, f) in builds {
             for k in 0..8 {

@@ -47,7 +47,7 @@ use rothray_primitives::{
 };
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
-use super::small_first8::{small_first8, First8, Ranges};
+use super::small_first8::{small_first8, First8, Ranges, Two};
 use super::{NodeKind, PacketMemo, Program};
 use crate::counts;
 
@@ -330,24 +330,40 @@ impl FirstWalk<'_> {
     }
 
     /// [`FirstWalk::take_small`] for two operands: all lanes at once
-    /// ([`small_first8`]), a lane with a NaN end as `take_small_n`'s.
+    /// ([`small_first8`]) on the solves where the packet's memo keeps them,
+    /// a lane with a NaN end as `take_small_n`'s.
     #[inline(always)]
     fn take_small2(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
         let (prog, memo, leaves) = (self.prog, self.memo, self.leaves);
-        let mut ops = SmallOps::<2>::of(prog, c);
-        ops.gather(prog, c, |leaf| Some(memo.with_solve(leaves, leaf, |r| *r).unwrap_or_else(|| self.solve_here(leaf))));
-        let lanes = m & ops.done;
+        let first = prog.first[c] as usize;
+        let leaf = [0, 1].map(|j| prog.first[prog.children[first + j] as usize]);
+        let kind = prog.kind[c];
+        let taken = memo.with_solves2(leaves, (leaf[0], leaf[1]), |r0, r1| self.take_two(&Two { kind, leaf, r: [r0, r1] }, m, tbox));
+        if taken.is_none() {
+            let mut ops = SmallOps::<2>::of(prog, c);
+            ops.gather(prog, c, |leaf| Some(self.solve_here(leaf)));
+            self.take_two(&Two::of(&ops), m, tbox);
+        }
+    }
+
+    /// [`FirstWalk::take_small2`] of the node `ops`.
+    #[inline(always)]
+    fn take_two(&mut self, ops: &Two, m: u32, tbox: &[f32; 8]) {
+        let lanes = m & ops.r[0].done & ops.r[1].done;
         // A lane that a solve left undone goes the walk's way.
         self.live &= !(m & !lanes);
         counts::wide_children(lanes.count_ones());
-        let f = small_first8(&ops, lanes, &Ranges { lo: &self.tmin, hi: &self.tmax, eps: &self.eps });
+        let f = small_first8(ops, lanes, &Ranges { lo: &self.tmin, hi: &self.tmax, eps: &self.eps });
         self.live &= !f.kill;
         self.put8(&f, tbox);
         let mut odd = f.odd;
-        while odd != 0 {
-            let k = odd.trailing_zeros() as usize;
-            odd &= odd - 1;
-            self.take_small_lane::<2, 4>(&ops, k, tbox);
+        if odd != 0 {
+            let ops = SmallOps::<2> { kind: ops.kind, count: 2, leaf: ops.leaf, r: [*ops.r[0], *ops.r[1]], done: lanes };
+            while odd != 0 {
+                let k = odd.trailing_zeros() as usize;
+                odd &= odd - 1;
+                self.take_small_lane::<2, 4>(&ops, k, tbox);
+            }
         }
     }
 
