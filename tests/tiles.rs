@@ -561,7 +561,10 @@ fn many_small_trees(rng: &mut SmallRng, n: usize, spread: f64, odd: bool) -> Sha
 /// and any hit). Mutations caught: no separation margin in `small_first`,
 /// a child's lower bound forgotten when a later child comes first. The
 /// walks must answer many lanes, and leave some, for the test to mean
-/// anything.
+/// anything. Tiles whose objects are such unions (and half-spaces) pick
+/// their packets' hits among the objects from the unions' records
+/// (`RenderScene::union_firsts`; a record taken there without the check
+/// that it is sure fails `packets_walk_wide_unions_together`).
 #[test]
 fn packets_find_first_entries_of_unions_of_small_trees() {
     let (mut rays, mut hits) = (0u64, 0u64);
@@ -607,10 +610,12 @@ fn packets_find_first_entries_of_unions_of_small_trees() {
     }
     let c = rothray::csg::take_eval_counts();
     println!(
-        "{rays} rays, {hits} hits; wide-union evaluations answered by packet walks {}, not answered {}; lanes settled by first entries {}",
-        c.packet_lanes, c.packet_misses, c.first_settled
+        "{rays} rays, {hits} hits; wide-union evaluations answered by packet walks {}, not answered {}; lanes settled by first entries {}; \
+         lanes settled among the objects {} (union roots read from the records), left {}",
+        c.packet_lanes, c.packet_misses, c.first_settled, c.object_settled, c.object_left
     );
     assert!(hits > rays / 4 && c.first_settled > rays / 5 && c.packet_misses > rays / 50, "too few hits, or lanes settled or not, to test");
+    assert!(c.object_settled > rays / 10 && c.object_left > rays / 100, "too few lanes settled among the objects, or left, to test");
 }
 
 /// A small object: a kernel leaf (sheared in some), a torus, or a union,

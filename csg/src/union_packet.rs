@@ -80,7 +80,7 @@ impl PacketMemo {
     /// callers: left to the compiler, the second caller made it a call in
     /// the wide union's loop, +0.8% instructions on scenes/forest.)
     #[inline(always)]
-    pub(crate) fn union_lane(
+    pub fn union_lane(
         &self,
         prog: &Program,
         leaves: &LeafTable,

@@ -23,7 +23,7 @@
 //! own lists ([`BoxList::packet_entries`]; none for a lone object, which
 //! the evaluation takes without a box test).
 
-use rothray_csg::{FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
+use rothray_csg::{first_surface, FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{box_wide::BoxTest8, LeafTable, Surf};
 
 use crate::box_list::BoxList;
@@ -32,12 +32,16 @@ use crate::tile::TileView;
 
 /// Is node `n` of `prog` an object root that a packet asks for its lanes'
 /// first surfaces: a kernel leaf or a small node of them
-/// ([`Program::packet_first_node`]: 8-lane answers), or another leaf but
-/// a mesh (each lane's own query, `RenderScene::object_first`, on its whole
-/// range: a torus, a sweep)? (A mesh object's packets take the mesh walks
-/// of `packet.rs`.)
+/// ([`Program::packet_first_node`]: 8-lane answers), a wide union that
+/// packets walk together ([`Program::walks_in_packets`]: each lane's answer
+/// read from the packet's record, `RenderScene::union_firsts`), or another
+/// leaf but a mesh (each lane's own query, `RenderScene::object_first`, on
+/// its whole range: a torus, a sweep)? (A mesh object's packets take the
+/// mesh walks of `packet.rs`.)
 pub(crate) fn simple_root(prog: &Program, leaves: &LeafTable, n: u32) -> bool {
-    prog.packet_first_node(leaves, n) || (prog.kind[n as usize] == NodeKind::Leaf && !leaves.is_mesh(prog.first[n as usize]))
+    prog.packet_first_node(leaves, n)
+        || prog.walks_in_packets(n)
+        || (prog.kind[n as usize] == NodeKind::Leaf && !leaves.is_mesh(prog.first[n as usize]))
 }
 
 /// The lanes' smallest answers so far.
@@ -151,6 +155,8 @@ impl RenderScene {
                 if !p.memo.first_surfaces8(tile.prog, &self.leaves, root, lanes, ranges, &mut firsts) {
                     return false;
                 }
+            } else if tile.prog.walks_in_packets(root) {
+                self.union_firsts(p, (tile.prog, root), (lanes, ranges), scratch, &mut firsts);
             } else {
                 // Each lane's own query of the leaf on its whole range.
                 let obj = crate::scene::ObjRef { prog: tile.prog, root, oi };
@@ -167,6 +173,52 @@ impl RenderScene {
             best.take(oi, lanes, &firsts, &entry);
         }
         true
+    }
+
+    /// The first surfaces on the lanes `lanes` of packet `p` of the object
+    /// whose root is `root`, a wide union that packets walk together, into
+    /// `out`: what `RenderScene::object_first` gives each lane, from the
+    /// same steps without the lane's walk to them. Its evaluation tests the
+    /// root's box, then takes the packet's record of the union
+    /// (`PacketMemo::union_lane`, made by the first lane that asks) and is
+    /// done when that record is sure; else the lane is unsure here (its own
+    /// visit redoes it). Why: on the forests the lanes' own ways to those
+    /// records (candidate lists, object visits, the evaluator's entry) were
+    /// some 10% of the cycles (perf, one thread).
+    #[inline(never)]
+    fn union_firsts(
+        &self,
+        p: &PacketRays,
+        (prog, root): (&Program, u32),
+        (lanes, ranges): (u32, LaneRanges),
+        scratch: &mut Scratch,
+        out: &mut [FirstOf; 8],
+    ) {
+        let b = &prog.bounds[root as usize];
+        for k in 0..8 {
+            if lanes & (1 << k) == 0 {
+                continue;
+            }
+            let (lo, hi) = (ranges.tmin[k], ranges.tmax[k]);
+            let ray = &p.ctx[k].ray;
+            if b.ray_range(ray.origin, ray.inv_dir, lo, hi).is_none() {
+                out[k] = FirstOf::Miss;
+                continue;
+            }
+            scratch.out.clear();
+            out[k] = match p.memo.union_lane(prog, &self.leaves, root, (k, (lo, hi)), &mut scratch.out) {
+                None => FirstOf::Unsure,
+                Some(v) => {
+                    let (spans, valid) = (scratch.out.as_slice(), v.min(hi));
+                    let f = first_surface(spans);
+                    if valid < hi && !crate::scene::sure(f, spans, valid, ranges.eps[k]) {
+                        FirstOf::Unsure
+                    } else {
+                        f.map_or(FirstOf::Miss, |(t, s)| FirstOf::Hit(t, s))
+                    }
+                }
+            };
+        }
     }
 
     /// The objects' answers for packet `p` when `tile` is one of simple

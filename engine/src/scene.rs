@@ -146,7 +146,7 @@ pub(crate) struct Retry {
 /// the full diagram has nothing:
 /// `csg_oracle::near_twins_nearest_hits_are_first_surfaces`).
 #[inline(always)]
-fn sure(f: Option<(f32, Surf)>, spans: &[Span], valid: f32, eps: f32) -> bool {
+pub(crate) fn sure(f: Option<(f32, Surf)>, spans: &[Span], valid: f32, eps: f32) -> bool {
     let Some((t, _)) = f else { return false };
     match spans.first() {
         Some(s) if s.s0.is_real() => s.s1.is_real() || s.t1 < valid || s.t1 - s.t0 > 2.0 * eps,
