@@ -112,6 +112,58 @@ impl PacketMemo {
         counts::packet_lane(true);
         Some(v)
     }
+
+    /// [`PacketMemo::union_lane`] for every lane `k` of `lanes` on
+    /// `(tmin[k], tmax[k])`, with one look-up of the record: `f(k, Some((spans,
+    /// v)))` where `union_lane` would append `spans` and return `Some(v)`,
+    /// `f(k, None)` where it would return `None`. (Lane by lane, the look-ups
+    /// and copies were most of the packets' picks of union roots, perf.)
+    #[inline(always)]
+    pub fn union_lanes(
+        &self,
+        (prog, leaves): (&Program, &LeafTable),
+        n: u32,
+        (lanes, tmin, tmax): (u32, &[f32; 8], &[f32; 8]),
+        mut f: impl FnMut(usize, Option<(&[rothray_primitives::Span], f32)>),
+    ) {
+        let mut u = self.unions.borrow_mut();
+        let walks = prog.walks_in_packets(n);
+        let i = if walks && u.lanes & lanes != 0 {
+            Some(match u.recs[..u.len].iter().position(|e| e.leaf == n) {
+                Some(i) => i,
+                None => u.walk(self, prog, leaves, n),
+            })
+        } else {
+            None
+        };
+        for k in 0..8 {
+            if lanes & (1 << k) == 0 {
+                continue;
+            }
+            let Some(i) = i.filter(|_| u.lanes & (1 << k) != 0) else {
+                f(k, None);
+                continue;
+            };
+            let e = &u.recs[i];
+            let (lo, hi) = (tmin[k], tmax[k]);
+            if e.done & (1 << k) == 0 || lo != e.tmin[k] || hi > e.tmax[k] {
+                counts::packet_lane(false);
+                f(k, None);
+                continue;
+            }
+            let (v, spans) = (e.valid[k], &e.spans[k]);
+            if v <= hi {
+                counts::packet_lane(true);
+                f(k, Some((spans.as_slice(), v)));
+            } else if spans.is_empty() && v == f32::INFINITY {
+                counts::packet_lane(true);
+                f(k, Some((&[], v)));
+            } else {
+                counts::packet_lane(false);
+                f(k, None);
+            }
+        }
+    }
 }
 
 impl UnionRecords {

@@ -156,7 +156,7 @@ impl RenderScene {
                     return false;
                 }
             } else if tile.prog.walks_in_packets(root) {
-                self.union_firsts(p, (tile.prog, root), (lanes, ranges), scratch, &mut firsts);
+                self.union_firsts(p, (tile.prog, root), (lanes, ranges), &mut firsts);
             } else {
                 // Each lane's own query of the leaf on its whole range.
                 let obj = crate::scene::ObjRef { prog: tile.prog, root, oi };
@@ -186,30 +186,26 @@ impl RenderScene {
     /// records (candidate lists, object visits, the evaluator's entry) were
     /// some 10% of the cycles (perf, one thread).
     #[inline(never)]
-    fn union_firsts(
-        &self,
-        p: &PacketRays,
-        (prog, root): (&Program, u32),
-        (lanes, ranges): (u32, LaneRanges),
-        scratch: &mut Scratch,
-        out: &mut [FirstOf; 8],
-    ) {
+    fn union_firsts(&self, p: &PacketRays, (prog, root): (&Program, u32), (lanes, ranges): (u32, LaneRanges), out: &mut [FirstOf; 8]) {
         let b = &prog.bounds[root as usize];
+        // The lanes whose range meets the root's box (the others miss it).
+        let mut met = 0u32;
         for k in 0..8 {
-            if lanes & (1 << k) == 0 {
-                continue;
+            if lanes & (1 << k) != 0 {
+                let ray = &p.ctx[k].ray;
+                if b.ray_range(ray.origin, ray.inv_dir, ranges.tmin[k], ranges.tmax[k]).is_some() {
+                    met |= 1 << k;
+                } else {
+                    out[k] = FirstOf::Miss;
+                }
             }
-            let (lo, hi) = (ranges.tmin[k], ranges.tmax[k]);
-            let ray = &p.ctx[k].ray;
-            if b.ray_range(ray.origin, ray.inv_dir, lo, hi).is_none() {
-                out[k] = FirstOf::Miss;
-                continue;
-            }
-            scratch.out.clear();
-            out[k] = match p.memo.union_lane(prog, &self.leaves, root, (k, (lo, hi)), &mut scratch.out) {
+        }
+        p.memo.union_lanes((prog, &self.leaves), root, (met, ranges.tmin, ranges.tmax), |k, rec| {
+            out[k] = match rec {
                 None => FirstOf::Unsure,
-                Some(v) => {
-                    let (spans, valid) = (scratch.out.as_slice(), v.min(hi));
+                Some((spans, v)) => {
+                    let hi = ranges.tmax[k];
+                    let valid = v.min(hi);
                     let f = first_surface(spans);
                     if valid < hi && !crate::scene::sure(f, spans, valid, ranges.eps[k]) {
                         FirstOf::Unsure
@@ -218,7 +214,7 @@ impl RenderScene {
                     }
                 }
             };
-        }
+        });
     }
 
     /// The objects' answers for packet `p` when `tile` is one of simple
