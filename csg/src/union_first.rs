@@ -48,7 +48,7 @@ use rothray_primitives::{
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
-use super::{NodeKind, PacketMemo, Program};
+use super::{cand_key, NodeKind, PacketMemo, Program};
 use crate::counts;
 
 /// Past the first entry `a`, the other children's boxes entered beyond
@@ -246,7 +246,8 @@ impl FirstWalk<'_> {
     #[inline(never)]
     fn solve_pending(&mut self) {
         let mut pending = std::mem::take(self.pending);
-        // Nearest first: the entries' keys sorted with their places, eight
+        // Nearest first: the entries' keys sorted with their places
+        // ([`cand_key`]: the entry's `total_cmp` order, then the place), eight
         // bytes each, instead of the 44-byte entries (that sort was 3.6% of
         // scenes/forest's cycles, perf, one thread, 1920x1080 flat). Ties
         // stay in the order met, as `sort_unstable_by` kept them up to its
@@ -256,7 +257,7 @@ impl FirstWalk<'_> {
         let n = pending.len();
         if n <= SORT_MAX {
             for (i, p) in pending.iter().enumerate() {
-                order[i] = (sort_key(p.0) as u64) << 32 | i as u64;
+                order[i] = cand_key(i as u32, p.0);
             }
             order[..n].sort_unstable();
         } else {
@@ -465,26 +466,18 @@ impl FirstWalk<'_> {
 /// stack (more: the entries themselves are sorted).
 const SORT_MAX: usize = 64;
 
-/// `x` as an integer in [`f32::total_cmp`]'s order.
-#[inline(always)]
-fn sort_key(x: f32) -> u32 {
-    let b = x.to_bits();
-    // Negative values: all bits but the sign flipped (so larger magnitudes
-    // sort lower); then the sign bit flipped so negatives sort first.
-    (b ^ ((((b as i32) >> 31) as u32) >> 1)) ^ 0x8000_0000
-}
-
 /// The most operands of a child that [`FirstWalk::take_small`] takes.
 pub(crate) const SMALL_OPS: usize = 4;
 
 #[cfg(test)]
 mod tests {
-    use super::sort_key;
+    use super::super::cand_key;
 
-    /// `sort_key` orders as `f32::total_cmp` (zeros, infinities, subnormals,
-    /// NaNs of both signs included).
+    /// `cand_key`'s order (by which the walk sorts its pending children)
+    /// is `f32::total_cmp`'s, then the place (zeros, infinities,
+    /// subnormals, NaNs of both signs included).
     #[test]
-    fn sort_keys_order_as_total_cmp() {
+    fn cand_keys_order_as_total_cmp() {
         let mut xs =
             vec![0.0f32, -0.0, 1.0, -1.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, -f32::NAN, 1e-45, -1e-45, f32::MAX, f32::MIN];
         let mut s = 0x9e3779b9u32;
@@ -494,9 +487,16 @@ mod tests {
             s ^= s << 5;
             xs.push(f32::from_bits(s));
         }
-        for &a in &xs {
-            for &b in xs.iter().step_by(7) {
-                assert_eq!(sort_key(a).cmp(&sort_key(b)), a.total_cmp(&b), "{a:e} ({:#x}) against {b:e} ({:#x})", a.to_bits(), b.to_bits());
+        for (i, &a) in xs.iter().enumerate() {
+            for (j, &b) in xs.iter().enumerate().step_by(7) {
+                let want = a.total_cmp(&b).then(i.cmp(&j));
+                assert_eq!(
+                    cand_key(i as u32, a).cmp(&cand_key(j as u32, b)),
+                    want,
+                    "{a:e} ({:#x}) against {b:e} ({:#x})",
+                    a.to_bits(),
+                    b.to_bits()
+                );
             }
         }
     }
