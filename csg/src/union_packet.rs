@@ -23,7 +23,7 @@
 use glam::Vec4;
 use rothray_primitives::{
     box_wide::{forms_packet, BoxWide, Lanes8, Rays8, Visit8},
-    Aabb, LeafTable, Ray,
+    Aabb, LeafTable, Ray, Span,
 };
 
 use super::union_first::{FirstWalk, LaneFirst, Pending};
@@ -80,7 +80,7 @@ impl PacketMemo {
     /// callers: left to the compiler, the second caller made it a call in
     /// the wide union's loop, +0.8% instructions on scenes/forest.)
     #[inline(always)]
-    pub fn union_lane(
+    pub(crate) fn union_lane(
         &self,
         prog: &Program,
         leaves: &LeafTable,
@@ -92,24 +92,9 @@ impl PacketMemo {
         if u.lanes & (1 << k) == 0 || !prog.walks_in_packets(n) {
             return None;
         }
-        let i = match u.recs[..u.len].iter().position(|e| e.leaf == n) {
-            Some(i) => i,
-            None => u.walk(self, prog, leaves, n),
-        };
-        let e = &u.recs[i];
-        let (lo, hi) = range;
-        if e.done & (1 << k) == 0 || lo != e.tmin[k] || hi > e.tmax[k] {
-            counts::packet_lane(false);
-            return None;
-        }
-        let (v, spans) = (e.valid[k], &e.spans[k]);
-        if v <= hi {
-            out.append(spans);
-        } else if !(spans.is_empty() && v == f32::INFINITY) {
-            counts::packet_lane(false);
-            return None;
-        }
-        counts::packet_lane(true);
+        let i = u.record_of(self, prog, leaves, n);
+        let (spans, v) = lane_answer(&u.recs[i], k, range)?;
+        out.append(spans);
         Some(v)
     }
 
@@ -124,49 +109,43 @@ impl PacketMemo {
         (prog, leaves): (&Program, &LeafTable),
         n: u32,
         (lanes, tmin, tmax): (u32, &[f32; 8], &[f32; 8]),
-        mut f: impl FnMut(usize, Option<(&[rothray_primitives::Span], f32)>),
+        mut f: impl FnMut(usize, Option<(&[Span], f32)>),
     ) {
         let mut u = self.unions.borrow_mut();
-        let walks = prog.walks_in_packets(n);
-        let i = if walks && u.lanes & lanes != 0 {
-            Some(match u.recs[..u.len].iter().position(|e| e.leaf == n) {
-                Some(i) => i,
-                None => u.walk(self, prog, leaves, n),
-            })
-        } else {
-            None
-        };
+        let walked = lanes & u.lanes;
+        let i = (walked != 0 && prog.walks_in_packets(n)).then(|| u.record_of(self, prog, leaves, n));
         for k in 0..8 {
-            if lanes & (1 << k) == 0 {
-                continue;
-            }
-            let Some(i) = i.filter(|_| u.lanes & (1 << k) != 0) else {
-                f(k, None);
-                continue;
-            };
-            let e = &u.recs[i];
-            let (lo, hi) = (tmin[k], tmax[k]);
-            if e.done & (1 << k) == 0 || lo != e.tmin[k] || hi > e.tmax[k] {
-                counts::packet_lane(false);
-                f(k, None);
-                continue;
-            }
-            let (v, spans) = (e.valid[k], &e.spans[k]);
-            if v <= hi {
-                counts::packet_lane(true);
-                f(k, Some((spans.as_slice(), v)));
-            } else if spans.is_empty() && v == f32::INFINITY {
-                counts::packet_lane(true);
-                f(k, Some((&[], v)));
-            } else {
-                counts::packet_lane(false);
-                f(k, None);
+            if lanes & (1 << k) != 0 {
+                let rec = i.filter(|_| walked & (1 << k) != 0).and_then(|i| lane_answer(&u.recs[i], k, (tmin[k], tmax[k])));
+                f(k, rec);
             }
         }
     }
 }
 
+/// Lane `k`'s answer from union record `e` for a nearest query on `(lo,
+/// hi)`, counted: its spans and where they stop being exact, when the
+/// record answers that query exactly as the lane's own walk would (see
+/// [`PacketMemo::union_lane`]).
+#[inline(always)]
+fn lane_answer(e: &MemoLeaf, k: usize, (lo, hi): (f32, f32)) -> Option<(&[Span], f32)> {
+    let (v, spans) = (e.valid[k], e.spans[k].as_slice());
+    let ok = e.done & (1 << k) != 0 && lo == e.tmin[k] && hi <= e.tmax[k] && (v <= hi || (spans.is_empty() && v == f32::INFINITY));
+    counts::packet_lane(ok);
+    ok.then_some((spans, v))
+}
+
 impl UnionRecords {
+    /// The place of the packet's record of wide union `n` of `prog`, walked
+    /// now when no lane asked for it before.
+    #[inline(always)]
+    fn record_of(&mut self, memo: &PacketMemo, prog: &Program, leaves: &LeafTable, n: u32) -> usize {
+        match self.recs[..self.len].iter().position(|e| e.leaf == n) {
+            Some(i) => i,
+            None => self.walk(memo, prog, leaves, n),
+        }
+    }
+
     /// Walks wide leaf union `n` of `prog` in nearest mode for the packet's
     /// lanes, each on its ray's whole range, into a new record; returns its
     /// place.
