@@ -23,7 +23,7 @@
 //! own lists ([`BoxList::packet_entries`]; none for a lone object, which
 //! the evaluation takes without a box test).
 
-use rothray_csg::{first_surface, FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
+use rothray_csg::{FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{box_wide::BoxTest8, LeafTable, Surf};
 
 use crate::box_list::BoxList;
@@ -180,7 +180,7 @@ impl RenderScene {
     /// `out`: what `RenderScene::object_first` gives each lane, from the
     /// same steps without the lane's walk to them. Its evaluation tests the
     /// root's box, then takes the packet's record of the union
-    /// (`PacketMemo::union_lane`, made by the first lane that asks) and is
+    /// (`PacketMemo::union_lanes`, made by the first lane that asks) and is
     /// done when that record is sure; else the lane is unsure here (its own
     /// visit redoes it). Why: on the forests the lanes' own ways to those
     /// records (candidate lists, object visits, the evaluator's entry) were
@@ -205,12 +205,9 @@ impl RenderScene {
                 None => FirstOf::Unsure,
                 Some((spans, v)) => {
                     let hi = ranges.tmax[k];
-                    let valid = v.min(hi);
-                    let f = first_surface(spans);
-                    if valid < hi && !crate::scene::sure(f, spans, valid, ranges.eps[k]) {
-                        FirstOf::Unsure
-                    } else {
-                        f.map_or(FirstOf::Miss, |(t, s)| FirstOf::Hit(t, s))
+                    match crate::scene::sure_first(spans, (v.min(hi), hi), ranges.eps[k]) {
+                        None => FirstOf::Unsure,
+                        Some(f) => f.map_or(FirstOf::Miss, |(t, s)| FirstOf::Hit(t, s)),
                     }
                 }
             };

@@ -146,12 +146,21 @@ pub(crate) struct Retry {
 /// the full diagram has nothing:
 /// `csg_oracle::near_twins_nearest_hits_are_first_surfaces`).
 #[inline(always)]
-pub(crate) fn sure(f: Option<(f32, Surf)>, spans: &[Span], valid: f32, eps: f32) -> bool {
+fn sure(f: Option<(f32, Surf)>, spans: &[Span], valid: f32, eps: f32) -> bool {
     let Some((t, _)) = f else { return false };
     match spans.first() {
         Some(s) if s.s0.is_real() => s.s1.is_real() || s.t1 < valid || s.t1 - s.t0 > 2.0 * eps,
         _ => t < valid - 16.0 * eps,
     }
+}
+
+/// The first surface of a nearest query's result `spans` on a range ending
+/// at `tmax`, exact up to `valid`, when it is sure ([`sure`], or exact on the
+/// whole range); `None` when the query must be tried again.
+#[inline(always)]
+pub(crate) fn sure_first(spans: &[Span], (valid, tmax): (f32, f32), eps: f32) -> Option<Option<(f32, Surf)>> {
+    let f = first_surface(spans);
+    (!(valid < tmax) || sure(f, spans, valid, eps)).then_some(f)
 }
 
 /// Calls `f` with the objects of `cands` (box entry, object) in the order
@@ -293,8 +302,7 @@ impl RenderScene {
             return self.masked_first(obj, ctx, range, scratch);
         }
         let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);
-        let f = first_surface(scratch.out.as_slice());
-        if valid < tmax && !sure(f, scratch.out.as_slice(), valid, ctx.eps) {
+        let Some(f) = sure_first(scratch.out.as_slice(), (valid, tmax), ctx.eps) else {
             if prog.masks_help(root) {
                 // A second try that sees past the cut entries before the
                 // redo in full.
@@ -311,7 +319,7 @@ impl RenderScene {
             let w = self.retry[oi as usize].window;
             let t1 = if w > 0.0 { valid + w / ctx.ray.dir.length() } else { tmax };
             return self.redo(obj, ctx, (tmin, t1, tmax), scratch);
-        }
+        };
         f
     }
 
