@@ -9,7 +9,9 @@
 //! from `Program::eval_in`). A small node's is exact where no two of its
 //! operands' boundaries lie within `2 eps` ([`small_first`]); elsewhere,
 //! and where the range starts inside it, the lane is [`FirstOf::Unsure`]
-//! and the caller evaluates it alone.
+//! and the caller evaluates it alone. A small tree of several levels
+//! (at most [`TREE_LEAVES`] kernel leaves) is answered the same way from
+//! its truth table (`tree_first.rs`).
 //!
 //! Why: on benches/scenes/forest_objects (10 000 leaves as objects) a
 //! lane's visit of its candidates and its per-object evaluations were a
@@ -18,6 +20,7 @@
 use rothray_primitives::{kernels8::Ranges8, LeafTable, Surf};
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
+use super::tree_first::{tree_first, TreeOps, TREE_LEAVES};
 use super::{NodeKind, PacketMemo, Program};
 
 /// The most operands of an object's root that [`PacketMemo::first_surfaces8`]
@@ -37,14 +40,16 @@ pub enum FirstOf {
 
 impl Program {
     /// Can [`PacketMemo::first_surfaces8`] answer node `n`: a kernel leaf,
-    /// or a narrow union, intersection or difference of at most
-    /// [`OBJECT_OPS`] kernel leaves?
+    /// a narrow union, intersection or difference of at most
+    /// [`OBJECT_OPS`] kernel leaves, or a small tree of at most
+    /// [`TREE_LEAVES`] of them?
     #[inline]
     pub fn packet_first_node(&self, leaves: &LeafTable, n: u32) -> bool {
         let nu = n as usize;
         match self.kind[nu] {
             NodeKind::Leaf => leaves.has_kernel8(self.first[nu]),
-            _ => self.leafy[nu] && self.wide[nu] == u32::MAX && self.small[nu] != 0 && self.count[nu] as usize <= OBJECT_OPS,
+            _ if self.leafy[nu] => self.wide[nu] == u32::MAX && self.small[nu] != 0 && self.count[nu] as usize <= OBJECT_OPS,
+            _ => self.small[nu] != 0 && self.small[nu] as usize <= TREE_LEAVES,
         }
     }
 }
@@ -71,36 +76,47 @@ impl PacketMemo {
             let leaf = prog.first[nu];
             return self.with_solve(leaves, leaf, |r| leaf_firsts(r, leaf, lanes, ray, out)).is_some();
         }
+        if !prog.leafy[nu] {
+            let Some(t) = TreeOps::gather(prog, nu, |leaf| self.with_solve(leaves, leaf, |r| *r)) else { return false };
+            firsts_of(lanes & t.ops.done, lanes, ray, out, |k| tree_first(&t, k, (ray.tmin[k], ray.eps[k])));
+            return true;
+        }
         let mut ops = SmallOps::<OBJECT_OPS>::of(prog, nu);
         if !ops.gather(prog, nu, |leaf| self.with_solve(leaves, leaf, |r| *r)) {
             return false;
         }
-        let done = lanes & ops.done;
-        for k in 0..8 {
-            if lanes & (1 << k) == 0 {
-                continue;
-            }
-            out[k] = if done & (1 << k) == 0 {
-                FirstOf::Unsure
-            } else {
-                match small_first::<OBJECT_OPS, { 2 * OBJECT_OPS }>(&ops, k, (ray.tmin[k], ray.eps[k])) {
-                    SmallFirst::Empty => FirstOf::Miss,
-                    SmallFirst::Span { t: (t0, _), s: (s0, _), .. } => {
-                        // Past the range's end nothing is asked; near it the
-                        // evaluation's clip may fuse (its redo's margin).
-                        if t0 >= ray.tmax[k] {
-                            FirstOf::Miss
-                        } else if t0 < ray.tmax[k] - 16.0 * ray.eps[k] {
-                            FirstOf::Hit(t0, s0)
-                        } else {
-                            FirstOf::Unsure
-                        }
-                    }
-                    SmallFirst::Inside | SmallFirst::From(_) => FirstOf::Unsure,
-                }
-            };
-        }
+        firsts_of(lanes & ops.done, lanes, ray, out, |k| small_first::<OBJECT_OPS, { 2 * OBJECT_OPS }>(&ops, k, (ray.tmin[k], ray.eps[k])));
         true
+    }
+}
+
+/// The first surfaces on the lanes `lanes` (those of `done` from `first`,
+/// a lane's first span of the node; the others unsure) into `out`.
+#[inline(always)]
+fn firsts_of(done: u32, lanes: u32, ray: LaneRanges, out: &mut [FirstOf; 8], first: impl Fn(usize) -> SmallFirst) {
+    for k in 0..8 {
+        if lanes & (1 << k) == 0 {
+            continue;
+        }
+        out[k] = if done & (1 << k) == 0 {
+            FirstOf::Unsure
+        } else {
+            match first(k) {
+                SmallFirst::Empty => FirstOf::Miss,
+                SmallFirst::Span { t: (t0, _), s: (s0, _), .. } => {
+                    // Past the range's end nothing is asked; near it the
+                    // evaluation's clip may fuse (its redo's margin).
+                    if t0 >= ray.tmax[k] {
+                        FirstOf::Miss
+                    } else if t0 < ray.tmax[k] - 16.0 * ray.eps[k] {
+                        FirstOf::Hit(t0, s0)
+                    } else {
+                        FirstOf::Unsure
+                    }
+                }
+                SmallFirst::Inside | SmallFirst::From(_) => FirstOf::Unsure,
+            }
+        };
     }
 }
 

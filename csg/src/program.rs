@@ -1363,6 +1363,8 @@ mod small_first8;
 #[path = "small_tree.rs"]
 pub(crate) mod small_tree;
 use small_tree::SmallLists;
+#[path = "tree_first.rs"]
+mod tree_first;
 #[path = "union_first.rs"]
 mod union_first;
 #[path = "union_packet.rs"]
