@@ -507,8 +507,10 @@ fn walk_wide_unions(far: bool) {
 /// four kernel leaves (spheres, boxes, cones, cylinders, half-spaces), some
 /// operands near twins of another (boundaries within the fusing tolerance),
 /// some trees exact copies, and with `odd` a few children the first-entry
-/// walk does not take (a torus, a union of a torus).
-fn many_small_trees(rng: &mut SmallRng, n: usize, spread: f64, odd: bool) -> Shape {
+/// walk does not take (a torus, a union of a torus). With `deep`, half the
+/// trees are two or three levels deep ([`tree_node`]: at most 8 leaves, or
+/// 12 in some, which the walk does not take).
+fn many_small_trees(rng: &mut SmallRng, n: usize, spread: f64, (odd, deep): (bool, bool)) -> Shape {
     let kernel = |rng: &mut SmallRng, c: DVec3| match rng.gen_range(0..5) {
         0 => Shape::Sphere { c: c + rp(rng, 0.1), r: rng.gen_range(0.05..0.3) },
         1 => Shape::Box { min: c - DVec3::splat(rng.gen_range(0.02..0.2)), max: c + DVec3::splat(rng.gen_range(0.02..0.2)) },
@@ -543,6 +545,9 @@ fn many_small_trees(rng: &mut SmallRng, n: usize, spread: f64, odd: bool) -> Sha
         }
         let tree = if odd && rng.gen_bool(0.02) {
             Shape::Torus { c, axis: DVec3::Y, major: 0.2, minor: 0.05 }
+        } else if deep && rng.gen_bool(0.5) {
+            let mut left = if rng.gen_bool(0.03) { 12 } else { 8 };
+            tree_node(rng, c, 0, &mut left)
         } else if rng.gen_bool(0.5) {
             Shape::Inter(ops)
         } else {
@@ -567,14 +572,28 @@ fn many_small_trees(rng: &mut SmallRng, n: usize, spread: f64, odd: bool) -> Sha
 /// that it is sure fails `packets_walk_wide_unions_together`).
 #[test]
 fn packets_find_first_entries_of_unions_of_small_trees() {
+    first_entries_of_unions(0x5e11, false);
+}
+
+/// [`packets_find_first_entries_of_unions_of_small_trees`] with trees two
+/// and three levels deep among the union's children (`tree_first.rs`).
+/// Mutation caught: a subtracted leaf's surface not flipped.
+#[test]
+fn packets_find_first_entries_of_unions_of_deep_trees() {
+    first_entries_of_unions(0xdee9, true);
+}
+
+/// The walks of unions of small trees (`deep`: some of several levels) in
+/// scenes from seeds `seed0..`, checked ray by ray against single rays.
+fn first_entries_of_unions(seed0: u64, deep: bool) {
     let (mut rays, mut hits) = (0u64, 0u64);
     let _ = rothray::csg::take_eval_counts();
     for seed in 0..40u64 {
-        let seed = 0x5e11 + seed;
+        let seed = seed0 + seed;
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..8 {
             let n = rng.gen_range(40..300);
-            let mut trees = vec![many_small_trees(&mut rng, n, 2.0, case % 4 == 3)];
+            let mut trees = vec![many_small_trees(&mut rng, n, 2.0, (case % 4 == 3, deep))];
             if rng.gen_bool(0.4) {
                 trees.push(random_tree_with(&mut rng, 2, false));
             }

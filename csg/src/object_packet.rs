@@ -10,7 +10,7 @@
 //! operands' boundaries lie within `2 eps` ([`small_first`]); elsewhere,
 //! and where the range starts inside it, the lane is [`FirstOf::Unsure`]
 //! and the caller evaluates it alone. A small tree of several levels
-//! (at most [`TREE_LEAVES`] kernel leaves) is answered the same way from
+//! (at most [`TREE_LEAVES`](super::tree_first::TREE_LEAVES) kernel leaves) is answered the same way from
 //! its truth table (`tree_first.rs`).
 //!
 //! Why: on benches/scenes/forest_objects (10 000 leaves as objects) a
@@ -20,7 +20,7 @@
 use rothray_primitives::{kernels8::Ranges8, LeafTable, Surf};
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
-use super::tree_first::{tree_first, TreeOps, TREE_LEAVES};
+use super::tree_first::{done_by, tree_first, TreeShape};
 use super::{NodeKind, PacketMemo, Program};
 
 /// The most operands of an object's root that [`PacketMemo::first_surfaces8`]
@@ -42,14 +42,14 @@ impl Program {
     /// Can [`PacketMemo::first_surfaces8`] answer node `n`: a kernel leaf,
     /// a narrow union, intersection or difference of at most
     /// [`OBJECT_OPS`] kernel leaves, or a small tree of at most
-    /// [`TREE_LEAVES`] of them?
+    /// [`TREE_LEAVES`](super::tree_first::TREE_LEAVES) of them?
     #[inline]
     pub fn packet_first_node(&self, leaves: &LeafTable, n: u32) -> bool {
         let nu = n as usize;
         match self.kind[nu] {
             NodeKind::Leaf => leaves.has_kernel8(self.first[nu]),
             _ if self.leafy[nu] => self.wide[nu] == u32::MAX && self.small[nu] != 0 && self.count[nu] as usize <= OBJECT_OPS,
-            _ => self.small[nu] != 0 && self.small[nu] as usize <= TREE_LEAVES,
+            _ => self.is_small_tree(nu),
         }
     }
 }
@@ -77,9 +77,12 @@ impl PacketMemo {
             return self.with_solve(leaves, leaf, |r| leaf_firsts(r, leaf, lanes, ray, out)).is_some();
         }
         if !prog.leafy[nu] {
-            let Some(t) = TreeOps::gather(prog, nu, |leaf| self.with_solve(leaves, leaf, |r| *r)) else { return false };
-            firsts_of(lanes & t.ops.done, lanes, ray, out, |k| tree_first(&t, k, (ray.tmin[k], ray.eps[k])));
-            return true;
+            let Some(t) = TreeShape::of(prog, nu) else { return false };
+            return self
+                .with_solves_n(leaves, &t.leaf[..t.count], |r| {
+                    firsts_of(lanes & done_by(r), lanes, ray, out, |k| tree_first(&t, r, k, (ray.tmin[k], ray.eps[k])))
+                })
+                .is_some();
         }
         let mut ops = SmallOps::<OBJECT_OPS>::of(prog, nu);
         if !ops.gather(prog, nu, |leaf| self.with_solve(leaves, leaf, |r| *r)) {

@@ -110,7 +110,7 @@ pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: 
         return SmallFirst::Empty;
     }
     let mut ev = [(0.0f32, 0usize, false); E];
-    let (n, inside) = lane_events(ops, k, lo - 2.0 * eps, &mut ev);
+    let (n, inside) = lane_events((ops.count, |j| &ops.r[j]), k, lo - 2.0 * eps, &mut ev);
     // Inside the node: `(m & all == want) != union` for the operands `m`
     // the point is inside (one compare per boundary, no match on the kind).
     let all = (1u32 << ops.count) - 1;
@@ -133,22 +133,22 @@ pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: 
     sweep(&mut ev[..n], inside, (lo, eps), member, surf)
 }
 
-/// Lane `k`'s boundaries `(place, operand, exit)` of the operands of `ops`
-/// from `near` on into `ev` (`E = 2 N` room); returns their number and the
-/// operands the range starts inside (bit `j` for operand `j`). (Written in
-/// place: returned, the array was a `memcpy` per lane, capsules +3.9%
-/// instructions.)
+/// Lane `k`'s boundaries `(place, operand, exit)` of the `count` operands
+/// whose solves `r(j)` gives, from `near` on, into `ev` (room for two per
+/// operand); returns their number and the operands the range starts inside
+/// (bit `j` for operand `j`). (Written in place: returned, the array was a
+/// `memcpy` per lane, capsules +3.9% instructions.)
 #[inline(always)]
-pub(crate) fn lane_events<const N: usize, const E: usize>(
-    ops: &SmallOps<N>,
+pub(crate) fn lane_events<'r, const E: usize>(
+    (count, r): (usize, impl Fn(usize) -> &'r Ranges8),
     k: usize,
     near: f32,
     ev: &mut [(f32, usize, bool); E],
 ) -> (usize, u32) {
     let mut n = 0;
     let mut inside = 0u32;
-    for j in 0..ops.count {
-        let r = &ops.r[j];
+    for j in 0..count {
+        let r = r(j);
         if r.hit & (1 << k) == 0 {
             continue;
         }

@@ -1,8 +1,9 @@
 //! The first surface of a small tree of any depth on each lane of a
-//! packet, from its leaves' 8-lane solves: an object's root whose nodes
-//! are all narrow and whose leaves are at most [`TREE_LEAVES`] kernel
-//! leaves ([`Program::small`]), such as a box cut by a sphere minus a union
-//! of cylinders.
+//! packet, from its leaves' 8-lane solves: a node whose nodes are all
+//! narrow and whose leaves are at most [`TREE_LEAVES`] kernel leaves
+//! ([`Program::is_small_tree`]), such as a box cut by a sphere minus a
+//! union of cylinders (an object's root), or a ball cut by a half-space
+//! minus a notch (a child of a forest's wide union).
 //!
 //! The argument of [`small_first`](super::small_first::small_first)
 //! carries over to any depth: where every leaf boundary from `lo - 2 eps`
@@ -12,23 +13,33 @@
 //! boundaries are the leaves' own, a leaf's surface flipped once for each
 //! difference it is subtracted by. So a lane sweeps all the leaves'
 //! boundaries in order and reads, at each, whether the set of leaves it is
-//! inside is inside the tree: one bit of the tree's truth table, made once
-//! per packet from the leaves' bit patterns by the tree's own operations
-//! (OR, AND, AND NOT on 256 bits).
+//! inside is inside the tree: one bit of the tree's truth table, made from
+//! the leaves' bit patterns by the tree's own operations (OR, AND, AND NOT
+//! on 256 bits).
 //!
 //! Why: such an object was evaluated lane by lane with span lists and
 //! `combine` at every node (benches/scenes/logo: `eval_node` and
-//! `small_node` over 60% of its instructions flat, callgrind 480x270);
-//! here a lane costs a sort of its boundaries and a sweep.
+//! `small_node` over 60% of its instructions flat, callgrind 480x270), and
+//! such a child made the lanes of a forest leave the packet's walk.
 
 use rothray_primitives::{kernels8::Ranges8, Surf};
 
-use super::small_first::{lane_events, sweep, SmallFirst, SmallOps};
+use super::small_first::{lane_events, sweep, SmallFirst};
 use super::{NodeKind, Program};
 
 /// The most leaves of a tree answered here (its truth table has
 /// `2^TREE_LEAVES` bits).
 pub const TREE_LEAVES: usize = 8;
+
+impl Program {
+    /// Is node `n` a small tree of several levels that [`tree_first`]
+    /// answers: narrow nodes down to at most [`TREE_LEAVES`] kernel leaves,
+    /// not all of them its own operands (those are `small_first`'s)?
+    #[inline(always)]
+    pub(crate) fn is_small_tree(&self, n: usize) -> bool {
+        !self.leafy[n] && self.small[n] != 0 && self.small[n] as usize <= TREE_LEAVES
+    }
+}
 
 /// Bit `m` of `LEAF[j]` (bit `m % 64` of word `m / 64`) is bit `j` of `m`:
 /// the sets of leaves inside leaf `j`.
@@ -43,52 +54,47 @@ const LEAF: [[u64; 4]; TREE_LEAVES] = [
     [0, 0, u64::MAX, u64::MAX],
 ];
 
-/// A small tree's leaves (in the order of a depth-first walk), their
-/// solves, and its truth table.
-pub(crate) struct TreeOps {
-    /// The leaves and their solves (`kind` unused).
-    pub(crate) ops: SmallOps<TREE_LEAVES>,
+/// A small tree's leaves (in the order of a depth-first walk) and its
+/// truth table.
+pub(crate) struct TreeShape {
+    /// How many leaves, and which.
+    pub(crate) count: usize,
+    pub(crate) leaf: [u32; TREE_LEAVES],
     /// Bit `j`: leaf `j`'s surfaces are flipped in the tree's result.
     flip: u32,
     /// Bit `m`: is a point inside exactly the leaves of `m` inside the tree?
     table: [u64; 4],
 }
 
-impl TreeOps {
-    /// The leaves of small tree `n` of `prog` solved by `solve`, and its
-    /// truth table; `None` when a solve is not to be had or the tree has
-    /// more than [`TREE_LEAVES`] leaves.
-    #[inline(always)]
-    pub(crate) fn gather(prog: &Program, n: usize, mut solve: impl FnMut(u32) -> Option<Ranges8>) -> Option<TreeOps> {
-        let ops = SmallOps { kind: prog.kind[n], count: 0, leaf: [0; TREE_LEAVES], r: [Ranges8::default(); TREE_LEAVES], done: u32::MAX };
-        let mut t = TreeOps { ops, flip: 0, table: [0; 4] };
-        t.table = t.pattern(prog, n, false, &mut solve)?;
+impl TreeShape {
+    /// The shape of small tree `n` of `prog`; `None` when it has more than
+    /// [`TREE_LEAVES`] leaves.
+    #[inline]
+    pub(crate) fn of(prog: &Program, n: usize) -> Option<TreeShape> {
+        let mut t = TreeShape { count: 0, leaf: [0; TREE_LEAVES], flip: 0, table: [0; 4] };
+        t.table = t.pattern(prog, n, false)?;
         Some(t)
     }
 
     /// The truth table of node `c` over the leaves met so far and its own
-    /// (added to `ops`); `flip`: is `c` subtracted an odd number of times?
-    fn pattern(&mut self, prog: &Program, c: usize, flip: bool, solve: &mut impl FnMut(u32) -> Option<Ranges8>) -> Option<[u64; 4]> {
+    /// (added to the list); `flip`: is `c` subtracted an odd number of times?
+    fn pattern(&mut self, prog: &Program, c: usize, flip: bool) -> Option<[u64; 4]> {
         let kind = prog.kind[c];
         if kind == NodeKind::Leaf {
-            let j = self.ops.count;
+            let j = self.count;
             if j == TREE_LEAVES {
                 return None;
             }
-            let leaf = prog.first[c];
-            let r = solve(leaf)?;
-            self.ops.leaf[j] = leaf;
-            self.ops.r[j] = r;
-            self.ops.done &= r.done;
+            self.leaf[j] = prog.first[c];
             self.flip |= (flip as u32) << j;
-            self.ops.count += 1;
+            self.count += 1;
             return Some(LEAF[j]);
         }
         let first = prog.first[c] as usize;
         let mut acc = [0u64; 4];
         for i in 0..prog.count[c] as usize {
             let sub = kind == NodeKind::Difference && i > 0;
-            let p = self.pattern(prog, prog.children[first + i] as usize, flip ^ sub, solve)?;
+            let p = self.pattern(prog, prog.children[first + i] as usize, flip ^ sub)?;
             for w in 0..4 {
                 acc[w] = match kind {
                     _ if i == 0 => p[w],
@@ -107,13 +113,14 @@ impl TreeOps {
         self.table[(m >> 6) as usize & 3] >> (m & 63) & 1 != 0
     }
 
-    /// Is the tree empty on the whole line of lane `k`: is no set of the
-    /// leaves its line meets (whether or not they overlap) inside it?
+    /// Is the tree empty on the whole line of lane `k` (`r`: the leaves'
+    /// solves): is no set of the leaves its line meets (whether or not they
+    /// overlap) inside it?
     #[inline(always)]
-    fn empty_on_line(&self, k: usize) -> bool {
+    fn empty_on_line(&self, r: &[&Ranges8], k: usize) -> bool {
         let mut t = self.table;
-        for j in 0..self.ops.count {
-            if self.ops.r[j].hit & (1 << k) == 0 {
+        for j in 0..self.count {
+            if r[j].hit & (1 << k) == 0 {
                 for w in 0..4 {
                     t[w] &= !LEAF[j][w];
                 }
@@ -123,20 +130,25 @@ impl TreeOps {
     }
 }
 
-/// Lane `k`'s first span of the tree `t` on the range starting at `lo`,
-/// as [`small_first`](super::small_first::small_first) gives it for a
-/// node of leaves (see the module's notes).
+/// The lanes that every solve of `r` did.
 #[inline(always)]
-pub(crate) fn tree_first(t: &TreeOps, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
-    if t.empty_on_line(k) {
+pub(crate) fn done_by(r: &[&Ranges8]) -> u32 {
+    r.iter().fold(u32::MAX, |d, r| d & r.done)
+}
+
+/// Lane `k`'s first span of the tree `t` on the range starting at `lo`,
+/// from its leaves' solves `r` (in `t`'s order), as
+/// [`small_first`](super::small_first::small_first) gives it for a node of
+/// leaves (see the module's notes).
+#[inline(always)]
+pub(crate) fn tree_first(t: &TreeShape, r: &[&Ranges8], k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
+    if t.empty_on_line(r, k) {
         return SmallFirst::Empty;
     }
-    let ops = &t.ops;
     let mut ev = [(0.0f32, 0usize, false); 2 * TREE_LEAVES];
-    let (n, inside) = lane_events(ops, k, lo - 2.0 * eps, &mut ev);
+    let (n, inside) = lane_events((t.count, |j| r[j]), k, lo - 2.0 * eps, &mut ev);
     let surf = |(_, j, exit): (f32, usize, bool)| {
-        let r = &ops.r[j];
-        let s = Surf::new(ops.leaf[j], if exit { r.s1[k] } else { r.s0[k] });
+        let s = Surf::new(t.leaf[j], if exit { r[j].s1[k] } else { r[j].s0[k] });
         if t.flip & (1 << j) != 0 {
             s.flip()
         } else {
