@@ -535,6 +535,35 @@ def forest_cut():
     return base
 
 
+def forest_deep():
+    """A forest of 10 000 trees two levels deep: scenes/forest (the example)
+    with every leaf made a small CSG tree of two or three kernel leaves (a
+    ball cut by a half-space minus a notch, a cone and its trunk cut to a
+    box, a trunk minus two notches): a wide union of deeper subtrees."""
+    with open(os.path.join(HERE, "forest.json")) as f:
+        base = json.load(f)
+    trees = []
+    for t in base["objects"][1]["shape"]["union"]:
+        if "sphere" in t:
+            c, r = t["sphere"]["center"], t["sphere"]["radius"]
+            trees.append(D(I(t, plane([0, -1, 0], -(c[1] - 0.3 * r))),
+                           sphere([c[0] + r, c[1] + 0.5 * r, c[2]], 0.4 * r)))
+        elif "cone" in t:
+            a, b = t["cone"]["a"], t["cone"]["b"]
+            ra = t["cone"]["radius_a"]
+            h = b[1] - a[1]
+            trunk = cyl([a[0], a[1] - 0.2 * h, a[2]], [a[0], a[1] + 0.1 * h, a[2]], 0.25 * ra)
+            trees.append(I(U(t, trunk), box([a[0] - ra, a[1] - 0.15 * h, a[2] - ra],
+                                            [a[0] + ra, b[1], a[2] + ra])))
+        else:
+            b, r = t["cylinder"]["b"], t["cylinder"]["radius"]
+            trees.append(D(t, U(sphere([b[0] + r, b[1], b[2]], 0.6 * r),
+                                sphere([b[0] - r, b[1], b[2]], 0.5 * r))))
+    base["name"] = "forest_deep"
+    base["objects"][1]["shape"]["union"] = trees
+    return base
+
+
 def forest_objects():
     """A forest of 10 000 objects: scenes/forest (the example) with every
     tree its own object instead of a child of one union (the objects' tree
@@ -551,7 +580,8 @@ def forest_objects():
 
 SCENES = {f.__name__: f for f in (polytopes, nesting, capsules, gear, tori,
                                   fill, ground, mesh_cut, mesh_mold,
-                                  sweep_csg, forest_cut, forest_objects)}
+                                  sweep_csg, forest_cut, forest_objects,
+                                  forest_deep)}
 
 
 def main(argv):
