@@ -40,8 +40,9 @@ fn flat_pictures_match_single_ray_hits() {
 }
 
 /// Packets change no pixel: scenes of every kind the packets serve (wide
-/// unions, meshes, analytic leaves solved eight at a time, tori that go ray
-/// by ray), shaded with shadows, rendered with packets and ray by ray
+/// unions of leaves and of small trees one or two levels deep, meshes,
+/// analytic leaves solved eight at a time, small trees as objects, tori
+/// that go ray by ray), shaded with shadows, rendered with packets and ray by ray
 /// ([`RenderScene::set_ray_by_ray`]) are byte-identical.
 #[test]
 fn packets_and_ray_by_ray_render_the_same_pictures() {
@@ -49,10 +50,12 @@ fn packets_and_ray_by_ray_render_the_same_pictures() {
     for (path, w, h) in [
         ("benches/scenes/forest.json", 240u32, 135u32),
         ("benches/scenes/forest_cut.json", 240, 135),
+        ("benches/scenes/forest_deep.json", 240, 135),
         ("benches/scenes/capsules.json", 240, 135),
         ("benches/scenes/mesh_cut.json", 240, 135),
         ("benches/scenes/tori.json", 240, 135),
         ("scenes/cheese.json", 240, 135),
+        ("scenes/logo.json", 240, 135),
         ("scenes/bunny.json", 160, 90),
     ] {
         let sf = rothray::io::load_scene(std::path::Path::new(&format!("{root}/{path}"))).expect("scene");
