@@ -20,7 +20,8 @@
 use rothray_primitives::{kernels8::Ranges8, LeafTable, Surf};
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
-use super::tree_first::{done_by, tree_first, TreeShape};
+use super::tree_first::{done_by, TreeShape};
+use super::tree_first8::{tree_first8, LaneStarts};
 use super::{NodeKind, PacketMemo, Program};
 
 /// The most operands of an object's root that [`PacketMemo::first_surfaces8`]
@@ -80,7 +81,10 @@ impl PacketMemo {
             let Some(t) = TreeShape::of(prog, nu) else { return false };
             return self
                 .with_solves_n(leaves, &t.leaf[..t.count], |r| {
-                    firsts_of(lanes & done_by(r), lanes, ray, out, |k| tree_first(&t, r, k, (ray.tmin[k], ray.eps[k])))
+                    let done = lanes & done_by(r);
+                    let mut f = [SmallFirst::Empty; 8];
+                    tree_first8(&t, r, done, &LaneStarts { lo: ray.tmin, eps: ray.eps }, &mut f);
+                    firsts_of(done, lanes, ray, out, |k| f[k])
                 })
                 .is_some();
         }

@@ -1365,6 +1365,8 @@ pub(crate) mod small_tree;
 use small_tree::SmallLists;
 #[path = "tree_first.rs"]
 mod tree_first;
+#[path = "tree_first8.rs"]
+mod tree_first8;
 #[path = "union_first.rs"]
 mod union_first;
 #[path = "union_packet.rs"]

@@ -66,7 +66,7 @@ impl<const N: usize> SmallOps<N> {
 }
 
 /// What a small node's result on a lane's range is known to be.
-#[derive(Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum SmallFirst {
     /// No span.
     Empty,

@@ -107,20 +107,40 @@ impl TreeShape {
         Some(acc)
     }
 
+    /// A shape of `count` leaves `leaf` with flips `flip` and truth table
+    /// `table` made by `f` of the leaves' patterns (any function: a superset
+    /// of trees), for tests.
+    #[cfg(test)]
+    pub(crate) fn for_tests(count: usize, leaf: [u32; TREE_LEAVES], flip: u32, f: impl FnOnce(&[[u64; 4]]) -> [u64; 4]) -> TreeShape {
+        TreeShape { count, leaf, flip, table: f(&LEAF[..count]) }
+    }
+
     /// Is a point inside exactly the leaves `m` inside the tree?
     #[inline(always)]
-    fn member(&self, m: u32) -> bool {
+    pub(crate) fn member(&self, m: u32) -> bool {
         self.table[(m >> 6) as usize & 3] >> (m & 63) & 1 != 0
     }
 
-    /// Is the tree empty on the whole line of lane `k` (`r`: the leaves'
-    /// solves): is no set of the leaves its line meets (whether or not they
+    /// The truth table as eight 32-bit words (bit `m % 32` of word `m / 32`).
+    #[inline(always)]
+    pub(crate) fn table_words(&self) -> [u32; 8] {
+        std::array::from_fn(|i| (self.table[i / 2] >> (32 * (i % 2))) as u32)
+    }
+
+    /// Are leaf `j`'s surfaces flipped in the tree's result?
+    #[inline(always)]
+    pub(crate) fn flip_of(&self, j: usize) -> bool {
+        self.flip & (1 << j) != 0
+    }
+
+    /// Is the tree empty on a whole line that misses the leaves `j` for
+    /// which `missed(j)`: is no set of the others (whether or not they
     /// overlap) inside it?
     #[inline(always)]
-    fn empty_on_line(&self, r: &[&Ranges8], k: usize) -> bool {
+    pub(crate) fn empty_for(&self, missed: impl Fn(usize) -> bool) -> bool {
         let mut t = self.table;
         for j in 0..self.count {
-            if r[j].hit & (1 << k) == 0 {
+            if missed(j) {
                 for w in 0..4 {
                     t[w] &= !LEAF[j][w];
                 }
@@ -142,14 +162,14 @@ pub(crate) fn done_by(r: &[&Ranges8]) -> u32 {
 /// leaves (see the module's notes).
 #[inline(always)]
 pub(crate) fn tree_first(t: &TreeShape, r: &[&Ranges8], k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
-    if t.empty_on_line(r, k) {
+    if t.empty_for(|j| r[j].hit & (1 << k) == 0) {
         return SmallFirst::Empty;
     }
     let mut ev = [(0.0f32, 0usize, false); 2 * TREE_LEAVES];
     let (n, inside) = lane_events((t.count, |j| r[j]), k, lo - 2.0 * eps, &mut ev);
     let surf = |(_, j, exit): (f32, usize, bool)| {
         let s = Surf::new(t.leaf[j], if exit { r[j].s1[k] } else { r[j].s0[k] });
-        if t.flip & (1 << j) != 0 {
+        if t.flip_of(j) {
             s.flip()
         } else {
             s

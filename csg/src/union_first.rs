@@ -439,12 +439,17 @@ impl FirstWalk<'_> {
     /// [`FirstWalk::take_tree`] of the tree `t` whose leaves' solves are `r`.
     #[inline(always)]
     fn take_tree_solved(&mut self, t: &TreeShape, r: &[&Ranges8], m: u32, tbox: &[f32; 8]) {
-        let mut lanes = m & done_by(r);
+        let lanes = m & done_by(r);
         // A lane that a solve left undone goes the walk's way.
         self.live &= !(m & !lanes);
-        while lanes != 0 {
-            let k = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
+        // Lane by lane: a tree child is mostly met by a few lanes, for which
+        // the 8-lane sweep (`tree_first8`) cost more (forest_deep 480x270
+        // flat, callgrind: +1.3% instructions when 6 lanes or more took it,
+        // +4.1% when all did).
+        let mut m = lanes;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
             counts::wide_child();
             let first = tree_first(t, r, k, (self.tmin[k], self.eps[k]));
             self.take_first(k, first, tbox);
