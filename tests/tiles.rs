@@ -504,7 +504,7 @@ fn walk_wide_unions(far: bool) {
 }
 
 /// A union of many small trees: intersections and differences of two to
-/// four kernel leaves (spheres, boxes, cones, cylinders, half-spaces), some
+/// four kernel leaves (seven with `deep`; spheres, boxes, cones, cylinders, half-spaces), some
 /// operands near twins of another (boundaries within the fusing tolerance),
 /// some trees exact copies, and with `odd` a few children the first-entry
 /// walk does not take (a torus, a union of a torus). With `deep`, half the
@@ -528,7 +528,7 @@ fn many_small_trees(rng: &mut SmallRng, n: usize, spread: f64, (odd, deep): (boo
                 break s;
             }
         }];
-        for _ in 1..rng.gen_range(2..=4) {
+        for _ in 1..rng.gen_range(2..=if deep { 7 } else { 4 }) {
             let s = if rng.gen_bool(0.2) {
                 // A near twin of an operand: 1e-6 to 1e-3 away (the fusing
                 // tolerance is about 5e-5 here), or an exact copy.

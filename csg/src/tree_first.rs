@@ -37,7 +37,14 @@ impl Program {
     /// not all of them its own operands (those are `small_first`'s)?
     #[inline(always)]
     pub(crate) fn is_small_tree(&self, n: usize) -> bool {
-        !self.leafy[n] && self.small[n] != 0 && self.small[n] as usize <= TREE_LEAVES
+        !self.leafy[n] && self.is_tree(n)
+    }
+
+    /// Is inner node `n` a small tree (of one level or more) of at most
+    /// [`TREE_LEAVES`] kernel leaves, which [`tree_first`] answers?
+    #[inline(always)]
+    pub(crate) fn is_tree(&self, n: usize) -> bool {
+        self.small[n] != 0 && self.small[n] as usize <= TREE_LEAVES
     }
 }
 

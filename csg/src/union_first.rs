@@ -290,7 +290,8 @@ impl FirstWalk<'_> {
                     }
                 }
                 _ if self.prog.small_leafy(c) => self.take_small(c, m, &tbox),
-                _ if self.prog.is_small_tree(c) => self.take_tree(c, m, &tbox),
+                // (Of several levels, or one of more operands than `take_small`'s.)
+                _ if self.prog.is_tree(c) => self.take_tree(c, m, &tbox),
                 _ => {
                     self.stop();
                     break;
@@ -413,8 +414,8 @@ impl FirstWalk<'_> {
         }
     }
 
-    /// Takes child `c`, a small tree of several levels
-    /// ([`Program::is_small_tree`]), for the lanes `m` whose box entries are
+    /// Takes child `c`, a small tree of several levels, or of one of more
+    /// than [`SMALL_OPS`] operands ([`Program::is_tree`]), for the lanes `m` whose box entries are
     /// `tbox`, from its leaves' solves ([`tree_first`]). (A forest whose
     /// trees are two levels deep, a ball cut by a half-space minus a notch,
     /// had every lane leave the walk: 2.8 times forest_cut's time.)
