@@ -7,7 +7,7 @@
 
 use rothray_primitives::{kernels8::Ranges8, Surf};
 
-use super::{NodeKind, Program};
+use super::{cand_key, cand_of_key, NodeKind, Program};
 
 /// A kernel leaf's span on lane `k` of its solve, clipped to `(lo, hi)` as
 /// `push_clipped` clips it: its ends, and whether each is the leaf's own
@@ -109,7 +109,7 @@ pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: 
     if empty {
         return SmallFirst::Empty;
     }
-    let mut ev = [(0.0f32, 0usize, false); E];
+    let mut ev = [0u64; E];
     let (n, inside) = lane_events((ops.count, |j| &ops.r[j]), k, lo - 2.0 * eps, &mut ev);
     // Inside the node: `(m & all == want) != union` for the operands `m`
     // the point is inside (one compare per boundary, no match on the kind).
@@ -121,7 +121,7 @@ pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: 
     };
     let member = |m: u32| (m & all == want) != union;
     let subtract = ops.kind == NodeKind::Difference;
-    let surf = |(_, j, exit): (f32, usize, bool)| {
+    let surf = |(j, exit): (usize, bool)| {
         let r = &ops.r[j];
         let s = Surf::new(ops.leaf[j], if exit { r.s1[k] } else { r.s0[k] });
         if subtract && j > 0 {
@@ -133,17 +133,38 @@ pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: 
     sweep(&mut ev[..n], inside, (lo, eps), member, surf)
 }
 
-/// Lane `k`'s boundaries `(place, operand, exit)` of the `count` operands
-/// whose solves `r(j)` gives, from `near` on, into `ev` (room for two per
-/// operand); returns their number and the operands the range starts inside
-/// (bit `j` for operand `j`). (Written in place: returned, the array was a
-/// `memcpy` per lane, capsules +3.9% instructions.)
+/// A boundary of a lane as one integer: [`cand_key`] of its place and of
+/// `2 j + exit` (operand `j`, an exit or an entry), so that integer order is
+/// the places' `total_cmp` order, then the operands' order, entry first:
+/// the order in which a stable sort of the boundaries as they are listed
+/// leaves them. (Sorted as 16-byte tuples, the swaps were most of the
+/// sort's work.)
+pub(crate) type Event = u64;
+
+/// The place of boundary `e`.
+#[inline(always)]
+fn place(e: Event) -> f32 {
+    cand_of_key(e).1
+}
+
+/// The operand of boundary `e`, and whether it is its exit.
+#[inline(always)]
+fn operand(e: Event) -> (usize, bool) {
+    let id = e as u32;
+    ((id >> 1) as usize, id & 1 != 0)
+}
+
+/// Lane `k`'s boundaries ([`Event`]) of the `count` operands whose solves
+/// `r(j)` gives, from `near` on, into `ev` (room for two per operand);
+/// returns their number and the operands the range starts inside (bit `j`
+/// for operand `j`). (Written in place: returned, the array was a `memcpy`
+/// per lane, capsules +3.9% instructions.)
 #[inline(always)]
 pub(crate) fn lane_events<'r, const E: usize>(
     (count, r): (usize, impl Fn(usize) -> &'r Ranges8),
     k: usize,
     near: f32,
-    ev: &mut [(f32, usize, bool); E],
+    ev: &mut [Event; E],
 ) -> (usize, u32) {
     let mut n = 0;
     let mut inside = 0u32;
@@ -156,7 +177,7 @@ pub(crate) fn lane_events<'r, const E: usize>(
             if t < near {
                 inside = if exit { inside & !(1 << j) } else { inside | (1 << j) };
             } else {
-                ev[n] = (t, j, exit);
+                ev[n] = cand_key((2 * j) as u32 | exit as u32, t);
                 n += 1;
             }
         }
@@ -168,27 +189,30 @@ pub(crate) fn lane_events<'r, const E: usize>(
 /// sorted here) of a lane whose range starts at `lo` inside the operands
 /// `inside` (bit per operand): `member` tells whether a set of operands
 /// (bit per operand) the line is inside is inside the node, `surf` the
-/// node's surface at a boundary.
+/// node's surface at a boundary (operand, exit).
 #[inline(always)]
 pub(crate) fn sweep(
-    ev: &mut [(f32, usize, bool)],
+    ev: &mut [Event],
     mut inside: u32,
     (lo, eps): (f32, f32),
     member: impl Fn(u32) -> bool,
-    surf: impl Fn((f32, usize, bool)) -> Surf,
+    surf: impl Fn((usize, bool)) -> Surf,
 ) -> SmallFirst {
-    // (By hand: at most sixteen, and `sort_unstable_by` was a call per lane
+    // (By hand: at most sixteen, and `sort_unstable` was a call per lane
     // and child.)
     for i in 1..ev.len() {
+        let x = ev[i];
         let mut j = i;
-        while j > 0 && ev[j - 1].0.total_cmp(&ev[j].0).is_gt() {
-            ev.swap(j - 1, j);
+        while j > 0 && ev[j - 1] > x {
+            ev[j] = ev[j - 1];
             j -= 1;
         }
+        ev[j] = x;
     }
     let mut sure = true;
     let mut prev = lo;
-    for &(t, _, _) in ev.iter() {
+    for &e in ev.iter() {
+        let t = place(e);
         if t == f32::INFINITY {
             break; // (ends at infinity bound nothing the range keeps)
         }
@@ -203,7 +227,7 @@ pub(crate) fn sweep(
     }
     if !sure {
         return match ev.first() {
-            Some(&(t, _, _)) => SmallFirst::From(t - eps),
+            Some(&e) => SmallFirst::From(place(e) - eps),
             None => SmallFirst::Empty,
         };
     }
@@ -211,17 +235,19 @@ pub(crate) fn sweep(
     let mut start = None;
     let mut was = false;
     for &e in ev.iter() {
-        inside = if e.2 { inside & !(1 << e.1) } else { inside | (1 << e.1) };
+        let (j, exit) = operand(e);
+        inside = if exit { inside & !(1 << j) } else { inside | (1 << j) };
         let now = member(inside);
         if now == was {
             continue;
         }
         was = now;
+        let t = place(e);
         match (now, start, span) {
-            (true, None, None) => start = Some((e.0, surf(e))),
-            (false, Some(s0), None) => span = Some((s0, (e.0, surf(e)))),
+            (true, None, None) => start = Some((t, surf((j, exit)))),
+            (false, Some(s0), None) => span = Some((s0, (t, surf((j, exit))))),
             (true, _, Some(((t0, s0), (t1, s1)))) => {
-                return SmallFirst::Span { t: (t0, t1), s: (s0, s1), next: e.0 };
+                return SmallFirst::Span { t: (t0, t1), s: (s0, s1), next: t };
             }
             _ => {}
         }

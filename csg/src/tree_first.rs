@@ -172,9 +172,9 @@ pub(crate) fn tree_first(t: &TreeShape, r: &[&Ranges8], k: usize, (lo, eps): (f3
     if t.empty_for(|j| r[j].hit & (1 << k) == 0) {
         return SmallFirst::Empty;
     }
-    let mut ev = [(0.0f32, 0usize, false); 2 * TREE_LEAVES];
+    let mut ev = [0u64; 2 * TREE_LEAVES];
     let (n, inside) = lane_events((t.count, |j| r[j]), k, lo - 2.0 * eps, &mut ev);
-    let surf = |(_, j, exit): (f32, usize, bool)| {
+    let surf = |(j, exit): (usize, bool)| {
         let s = Surf::new(t.leaf[j], if exit { r[j].s1[k] } else { r[j].s0[k] });
         if t.flip_of(j) {
             s.flip()
