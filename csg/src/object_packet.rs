@@ -10,7 +10,7 @@
 //! operands' boundaries lie within `2 eps` ([`small_first`]); elsewhere,
 //! and where the range starts inside it, the lane is [`FirstOf::Unsure`]
 //! and the caller evaluates it alone. A small tree of several levels
-//! (at most [`TREE_LEAVES`](super::tree_first::TREE_LEAVES) kernel leaves) is answered the same way from
+//! (at most eight kernel leaves) is answered the same way from
 //! its truth table (`tree_first.rs`).
 //!
 //! Why: on benches/scenes/forest_objects (10 000 leaves as objects) a
@@ -43,7 +43,7 @@ impl Program {
     /// Can [`PacketMemo::first_surfaces8`] answer node `n`: a kernel leaf,
     /// a narrow union, intersection or difference of at most
     /// [`OBJECT_OPS`] kernel leaves, or a small tree of at most
-    /// [`TREE_LEAVES`](super::tree_first::TREE_LEAVES) of them?
+    /// eight of them (`tree_first.rs`)?
     #[inline]
     pub fn packet_first_node(&self, leaves: &LeafTable, n: u32) -> bool {
         let nu = n as usize;

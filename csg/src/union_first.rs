@@ -24,8 +24,10 @@
 //!
 //! A wide union of small trees ([`Program::is_meet_union`]: a forest of
 //! trees cut by half-spaces, of rounded or hollowed pieces) is walked the
-//! same way when its children are kernel leaves or intersections and
-//! differences of a few of them ([`Program::small_leafy`]). Such a
+//! same way when its children are kernel leaves, intersections and
+//! differences of a few of them ([`Program::small_leafy`]), or small trees
+//! of up to eight kernel leaves at any depth ([`Program::is_tree`], answered
+//! lane by lane by `tree_first`, with the same argument). Such a
 //! child's spans come from its operands' 8-lane solves by the exact set
 //! operation where no two of their boundaries lie within `2 eps` of each
 //! other (then `combine` fuses, merges and drops nothing; see

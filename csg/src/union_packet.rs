@@ -274,9 +274,10 @@ impl Program {
     /// Is node `n` a wide union of at least [`PACKET_UNION_MIN`] subtrees
     /// (not all leaves), none unbounded, with a packet tree? Packets find
     /// their lanes' first entries in it (`union_first.rs`) when its
-    /// children are kernel leaves or small trees of a few of them
-    /// ([`Program::small_leafy`]; a walk that meets another kind answers no
-    /// lane). A forest of trees cut by half-spaces is one.
+    /// children are kernel leaves or small trees of them
+    /// ([`Program::small_leafy`], `Program::is_tree`; a walk that meets
+    /// another kind answers no lane). A forest of trees cut by half-spaces
+    /// is one.
     #[inline]
     pub fn is_meet_union(&self, n: u32) -> bool {
         let nu = n as usize;
