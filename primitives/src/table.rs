@@ -116,7 +116,8 @@ pub enum LeafKind {
     Torus,
     /// Half-space, traced against its world plane in f64 (normal, and
     /// offset relative to the anchor, in its `maps64` entry; see
-    /// [`crate::table64`]); its unit local normal in `p0.xyz` (for shading).
+    /// [`crate::table64`]); its unit local normal in `p0.xyz`, its world normal
+    /// (what shading reads) in `p1.xyz`.
     HalfSpace,
     /// Van Wijk swept sphere (`ext` indexes [`LeafTable::sweeps`]).
     SweptSphere,
@@ -704,7 +705,10 @@ impl LeafTable {
                 let n = h.normal.as_dvec3();
                 let w = (h.offset as f64 - n.dot(b)) / n.length();
                 let z = Affine3A::from_mat3_translation(inv32.matrix3.into(), Vec3::ZERO);
-                (c.kind, (z, c.p0.truncate().extend(w as f32), c.p1))
+                // `p1`: the world normal, as `normal` would make it at every
+                // hit (a plane under a scene is most of its hits: the map and
+                // normalisation were 8% of benches/scenes/ground lit, perf).
+                (c.kind, (z, c.p0.truncate().extend(w as f32), world_normal(&z, c.p0.truncate()).extend(0.0)))
             }
             _ => (c.kind, (inv32, c.p0, c.p1)),
         };
@@ -1151,8 +1155,11 @@ impl LeafTable {
         if matches!(self.kind[iu], LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone) {
             return self.quadric_normal(iu, sub, ray, t);
         }
+        if self.kind[iu] == LeafKind::HalfSpace {
+            // Made once (`push`): `world_normal` of the local normal.
+            return self.p1[iu].truncate();
+        }
         let m = &self.to_local[iu];
-        let p0 = self.p0[iu];
         if self.kind[iu] == LeafKind::Mesh && !self.meshes[self.ext[iu] as usize].normal_needs_point(sub) {
             // A triangle's normal does not depend on the point: skip transforming it.
             let nl = self.meshes[self.ext[iu] as usize].normal(sub, Vec3::ZERO);
@@ -1170,7 +1177,7 @@ impl LeafTable {
             LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus => {
                 unreachable!("made in f64 (ball_frame, quadric_normal, line64)")
             }
-            LeafKind::HalfSpace => p0.truncate(),
+            LeafKind::HalfSpace => unreachable!("made at push (p1)"),
             LeafKind::SweptSphere => self.sweeps[self.ext[iu] as usize].normal(sub, l()),
             LeafKind::GenCylinder => self.gcyls[self.ext[iu] as usize].normal(sub, l()),
             LeafKind::Mesh => self.meshes[self.ext[iu] as usize].normal(sub, l()),
