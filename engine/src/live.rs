@@ -402,11 +402,16 @@ fn copy_leaves(scene: &mut RenderScene, baked: &Baked, s: Slice, at: Slice) {
         put(&mut dst.p0, b, src.p0[a]);
         put(&mut dst.p1, b, src.p1[a]);
         put(&mut dst.ext, b, ext as u32);
-        let map = if src.kind[a] == LeafKind::Mesh {
-            dst.mesh_maps.push(src.mesh_maps[src.mesh_map[a] as usize]);
-            dst.mesh_maps.len() - 1
-        } else {
-            0
+        let map = match src.kind[a] {
+            LeafKind::Mesh => {
+                dst.mesh_maps.push(src.mesh_maps[src.mesh_map[a] as usize]);
+                dst.mesh_maps.len() - 1
+            }
+            LeafKind::Cuboid => {
+                dst.box_normals.push(src.box_normals[src.mesh_map[a] as usize]);
+                dst.box_normals.len() - 1
+            }
+            _ => 0,
         };
         put(&mut dst.mesh_map, b, map as u32);
         put(&mut scene.leaf_info, b, baked.leaf_info[a].clone());

@@ -537,11 +537,16 @@ pub struct LeafTable {
     /// f64: the linear part and the anchor's local point ([`crate::table64`]);
     /// per half-space, its f64 world plane relative to the anchor instead.
     pub maps64: Vec<(DMat3, DVec3)>,
-    /// Per leaf, for a mesh: its entry in `mesh_maps`; 0 for other kinds.
+    /// Per leaf, for a mesh: its entry in `mesh_maps`; for a box: its entry
+    /// in `box_normals`; 0 for other kinds.
     pub mesh_map: Vec<u32>,
     /// Per mesh leaf: its f64 world-to-local map, through which its rays
     /// are mapped ([`LeafTable::mesh_line`]).
     pub mesh_maps: Vec<MeshMap>,
+    /// Per box leaf: its faces' world normals by sub-surface, made once
+    /// ([`LeafTable::normal`] reads them; made at every hit, the map and the
+    /// normalisation were a few % of lit scenes of boxes, perf).
+    pub box_normals: Vec<[Vec3; 6]>,
     /// Polish tolerance of the torus roots, relative to the minor radius (see
     /// [`kernels::torus_tol`]; a bake sets [`kernels::TORUS_TOLERANCE`] unless
     /// the `torus` knob says otherwise; 0 is full f64 precision).
@@ -577,6 +582,7 @@ impl LeafTable {
         self.ext.clear();
         self.mesh_map.clear();
         self.mesh_maps.clear();
+        self.box_normals.clear();
         self.sweeps.clear();
         self.gcyls.clear();
         self.meshes.clear();
@@ -729,7 +735,12 @@ impl LeafTable {
             ext = self.maps64.len() - 1;
         }
         self.ext.push(ext as u32);
-        self.mesh_map.push(0);
+        let mut map = 0;
+        if kind == LeafKind::Cuboid {
+            self.box_normals.push(std::array::from_fn(|sub| world_normal(&inv32, box_face_normal(sub as u32))));
+            map = self.box_normals.len() - 1;
+        }
+        self.mesh_map.push(map as u32);
         Ok(i)
     }
 
@@ -1159,6 +1170,10 @@ impl LeafTable {
             // Made once (`push`): `world_normal` of the local normal.
             return self.p1[iu].truncate();
         }
+        if self.kind[iu] == LeafKind::Cuboid {
+            // Made once (`push`): `world_normal` of the face's local normal.
+            return self.box_normals[self.mesh_map[iu] as usize][sub as usize % 6];
+        }
         let m = &self.to_local[iu];
         if self.kind[iu] == LeafKind::Mesh && !self.meshes[self.ext[iu] as usize].normal_needs_point(sub) {
             // A triangle's normal does not depend on the point: skip transforming it.
@@ -1169,11 +1184,7 @@ impl LeafTable {
         // box's face and a half-space's plane give theirs without it).
         let l = || self.local_point(iu, o) + m.transform_vector3(d) * t;
         let nl = match self.kind[iu] {
-            LeafKind::Cuboid => {
-                let mut n = Vec3::ZERO;
-                n[(sub / 2) as usize] = if sub % 2 == 1 { 1.0 } else { -1.0 };
-                n
-            }
+            LeafKind::Cuboid => unreachable!("made at push (box_normals)"),
             LeafKind::Sphere | LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Torus => {
                 unreachable!("made in f64 (ball_frame, quadric_normal, line64)")
             }
@@ -1184,6 +1195,13 @@ impl LeafTable {
         };
         world_normal(m, nl)
     }
+}
+
+/// A box's local normal on face `sub` (`2 axis + side`: -axis, then +axis).
+fn box_face_normal(sub: u32) -> Vec3 {
+    let mut n = Vec3::ZERO;
+    n[(sub / 2) as usize] = if sub % 2 == 1 { 1.0 } else { -1.0 };
+    n
 }
 
 /// The unit world normal of local normal `nl` under the world-to-local map `m`
