@@ -509,30 +509,35 @@ def knob_obj(path):
             f.write("f %d %d %d\n" % (a + 1, b + 1, c + 1))
 
 
+def forest_with(name, tree):
+    """scenes/forest (the example) named `name`, each of its trees (a
+    ball, cone or cylinder leaf) replaced by `tree(leaf)`."""
+    with open(os.path.join(HERE, "forest.json")) as f:
+        base = json.load(f)
+    base["name"] = name
+    u = base["objects"][1]["shape"]
+    u["union"] = [tree(t) for t in u["union"]]
+    return base
+
+
 def forest_cut():
     """A forest of 10 000 cut trees: scenes/forest (the example) with every
     leaf made a small CSG subtree (a ball with its bottom cut off by a
     half-space, a cone cut to a box, a trunk minus a notch): a wide union
     whose children are not leaves."""
-    with open(os.path.join(HERE, "forest.json")) as f:
-        base = json.load(f)
-    trees = []
-    for t in base["objects"][1]["shape"]["union"]:
+    def cut(t):
         if "sphere" in t:
             c, r = t["sphere"]["center"], t["sphere"]["radius"]
-            trees.append(I(t, plane([0, -1, 0], -(c[1] - 0.3 * r))))
-        elif "cone" in t:
+            return I(t, plane([0, -1, 0], -(c[1] - 0.3 * r)))
+        if "cone" in t:
             a, b = t["cone"]["a"], t["cone"]["b"]
             ra = t["cone"]["radius_a"]
             h = b[1] - a[1]
-            trees.append(I(t, box([a[0] - ra, a[1] + 0.05 * h, a[2] - ra],
-                                  [a[0] + ra, b[1], a[2] + ra])))
-        else:
-            b, r = t["cylinder"]["b"], t["cylinder"]["radius"]
-            trees.append(D(t, sphere([b[0] + r, b[1], b[2]], 0.6 * r)))
-    base["name"] = "forest_cut"
-    base["objects"][1]["shape"]["union"] = trees
-    return base
+            return I(t, box([a[0] - ra, a[1] + 0.05 * h, a[2] - ra],
+                            [a[0] + ra, b[1], a[2] + ra]))
+        b, r = t["cylinder"]["b"], t["cylinder"]["radius"]
+        return D(t, sphere([b[0] + r, b[1], b[2]], 0.6 * r))
+    return forest_with("forest_cut", cut)
 
 
 def forest_deep():
@@ -540,28 +545,22 @@ def forest_deep():
     with every leaf made a small CSG tree of two or three kernel leaves (a
     ball cut by a half-space minus a notch, a cone and its trunk cut to a
     box, a trunk minus two notches): a wide union of deeper subtrees."""
-    with open(os.path.join(HERE, "forest.json")) as f:
-        base = json.load(f)
-    trees = []
-    for t in base["objects"][1]["shape"]["union"]:
+    def deep(t):
         if "sphere" in t:
             c, r = t["sphere"]["center"], t["sphere"]["radius"]
-            trees.append(D(I(t, plane([0, -1, 0], -(c[1] - 0.3 * r))),
-                           sphere([c[0] + r, c[1] + 0.5 * r, c[2]], 0.4 * r)))
-        elif "cone" in t:
+            return D(I(t, plane([0, -1, 0], -(c[1] - 0.3 * r))),
+                     sphere([c[0] + r, c[1] + 0.5 * r, c[2]], 0.4 * r))
+        if "cone" in t:
             a, b = t["cone"]["a"], t["cone"]["b"]
             ra = t["cone"]["radius_a"]
             h = b[1] - a[1]
             trunk = cyl([a[0], a[1] - 0.2 * h, a[2]], [a[0], a[1] + 0.1 * h, a[2]], 0.25 * ra)
-            trees.append(I(U(t, trunk), box([a[0] - ra, a[1] - 0.15 * h, a[2] - ra],
-                                            [a[0] + ra, b[1], a[2] + ra])))
-        else:
-            b, r = t["cylinder"]["b"], t["cylinder"]["radius"]
-            trees.append(D(t, U(sphere([b[0] + r, b[1], b[2]], 0.6 * r),
-                                sphere([b[0] - r, b[1], b[2]], 0.5 * r))))
-    base["name"] = "forest_deep"
-    base["objects"][1]["shape"]["union"] = trees
-    return base
+            return I(U(t, trunk), box([a[0] - ra, a[1] - 0.15 * h, a[2] - ra],
+                                      [a[0] + ra, b[1], a[2] + ra]))
+        b, r = t["cylinder"]["b"], t["cylinder"]["radius"]
+        return D(t, U(sphere([b[0] + r, b[1], b[2]], 0.6 * r),
+                      sphere([b[0] - r, b[1], b[2]], 0.5 * r)))
+    return forest_with("forest_deep", deep)
 
 
 def forest_objects():
@@ -583,20 +582,14 @@ def forest_pitted():
     (the example) with every ball a difference of six leaves (more operands
     than the packets' two-to-four-operand pass takes). Not in the suite:
     `gen.py --out DIR forest_pitted` writes it to DIR."""
-    with open(os.path.join(HERE, "forest.json")) as f:
-        base = json.load(f)
-    trees = []
-    for t in base["objects"][1]["shape"]["union"]:
-        if "sphere" in t:
-            c, r = t["sphere"]["center"], t["sphere"]["radius"]
-            pits = [(1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1), (0, 1, 0)]
-            trees.append(D(t, *[sphere([c[0] + r * x, c[1] + r * y, c[2] + r * z], 0.3 * r)
-                                for x, y, z in pits]))
-        else:
-            trees.append(t)
-    base["name"] = "forest_pitted"
-    base["objects"][1]["shape"]["union"] = trees
-    return base
+    pits = [(1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1), (0, 1, 0)]
+
+    def pitted(t):
+        if "sphere" not in t:
+            return t
+        c, r = t["sphere"]["center"], t["sphere"]["radius"]
+        return D(t, *[sphere([c[0] + r * x, c[1] + r * y, c[2] + r * z], 0.3 * r) for x, y, z in pits])
+    return forest_with("forest_pitted", pitted)
 
 
 SCENES = {f.__name__: f for f in (polytopes, nesting, capsules, gear, tori,
