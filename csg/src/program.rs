@@ -1350,6 +1350,9 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
     }
 }
 
+#[cfg(test)]
+#[path = "lane_ends.rs"]
+mod lane_ends;
 #[path = "leaf_packet.rs"]
 mod leaf_packet;
 #[path = "masked.rs"]

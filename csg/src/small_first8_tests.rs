@@ -4,23 +4,10 @@
 //! within a few eps of each other or equal, infinite ends (half-spaces),
 //! NaN ends, short spans, lanes that miss, both node kinds.
 
+use super::super::lane_ends::end;
 use super::super::small_first::{small_first, SmallFirst};
 use super::*;
 use rand::{rngs::SmallRng, Rng, SeedableRng};
-
-/// One end: near the range's start `lo`, near a pool value, or anywhere,
-/// nudged by multiples of eps; sometimes infinite or NaN.
-fn end(rng: &mut SmallRng, lo: f32, eps: f32, pool: &[f32]) -> f32 {
-    let nudge = [0.0, 0.5, 1.0, 1.9, 2.0, 2.1, 4.0, 8.0, 8.5, -0.5, -1.0, -2.0, -2.1][rng.gen_range(0..13)];
-    match rng.gen_range(0..20) {
-        0 => f32::INFINITY,
-        1 => f32::NEG_INFINITY,
-        2 if rng.gen_bool(0.2) => f32::NAN,
-        3..=6 => lo + nudge * eps,
-        7..=12 => pool[rng.gen_range(0..pool.len())] + nudge * eps,
-        _ => lo + rng.gen_range(-1.0..4.0f32),
-    }
-}
 
 /// A span put: its ends and surfaces.
 type Put = (f32, f32, Surf, Surf);

@@ -5,22 +5,9 @@
 //! within a few eps of each other or equal, infinite ends, NaN ends, lanes
 //! that miss.
 
+use super::super::lane_ends::end;
 use super::*;
 use rand::{rngs::SmallRng, Rng, SeedableRng};
-
-/// One end: near the range's start `lo`, near a pool value, or anywhere,
-/// nudged by multiples of eps; sometimes infinite or NaN.
-fn end(rng: &mut SmallRng, lo: f32, eps: f32, pool: &[f32]) -> f32 {
-    let nudge = [0.0, 0.5, 1.0, 1.9, 2.0, 2.1, 4.0, 8.0, -0.5, -1.0, -2.0, -2.1][rng.gen_range(0..12)];
-    match rng.gen_range(0..24) {
-        0 => f32::INFINITY,
-        1 => f32::NEG_INFINITY,
-        2 if rng.gen_bool(0.2) => f32::NAN,
-        3..=5 => lo + nudge * eps,
-        6..=10 => pool[rng.gen_range(0..pool.len())] + nudge * eps,
-        _ => lo + rng.gen_range(-1.0..4.0f32),
-    }
-}
 
 /// A random truth table over the leaves' patterns `p`: a random tree of
 /// unions, intersections and differences, or (sometimes) random bits.
