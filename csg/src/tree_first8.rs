@@ -191,7 +191,7 @@ pub(crate) unsafe fn tree_first8_avx2(t: &TreeShape, r: &[&Ranges8], lanes: u32,
         _mm256_storeu_si256(o.as_mut_ptr() as *mut __m256i, v);
         o
     };
-    let lanes8 = Lanes8 {
+    let swept = Sweep8 {
         first: f32s(key[0]),
         unsure: _mm256_movemask_ps(unsure) as u32,
         nan: _mm256_movemask_ps(nan) as u32,
@@ -204,11 +204,11 @@ pub(crate) unsafe fn tree_first8_avx2(t: &TreeShape, r: &[&Ranges8], lanes: u32,
         ia: u32s(ia),
         ib: u32s(ib),
     };
-    lanes8.answer(t, r, lanes, ranges, out);
+    swept.answer(t, r, lanes, ranges, out);
 }
 
 /// What the 8-lane sweep found, per lane.
-struct Lanes8 {
+struct Sweep8 {
     /// The smallest boundary.
     first: [f32; 8],
     /// Lane masks: not sure, a NaN boundary, starting inside the tree.
@@ -227,7 +227,7 @@ struct Lanes8 {
     ib: [u32; 8],
 }
 
-impl Lanes8 {
+impl Sweep8 {
     /// Each lane's answer into `out`, as `tree_first` gives it.
     fn answer(&self, t: &TreeShape, r: &[&Ranges8], lanes: u32, ranges: &LaneStarts, out: &mut [SmallFirst; 8]) {
         let inf = f32::INFINITY;
