@@ -204,7 +204,11 @@ fn cone<D: D8>(o: &[D; 3], d: &[D; 3], ra: f64, rb: f64) -> R8<D> {
     // `cone_pieces`: linear within 1e-12 of `norm`.
     let lin = D::splat(1e-12).mul(norm).ge(abs8(a));
     let b0 = b.eq(zero);
-    let tl = c.neg().div(D::splat(2.0).mul(b));
+    // Two divisions only where a lane reads them (a line near a generator,
+    // a root at 0: rare): each one's result is read under its own mask
+    // below. Division is the kernels' bottleneck (f64 `vdivpd`: some 16
+    // cycles a register).
+    let tl = if lin.bitmask() != 0 { c.neg().div(D::splat(2.0).mul(b)) } else { zero };
     let bpos = b.gt(zero);
     // Linear: b = 0 gives the whole line where c <= 0; else one half-line.
     let lin_hit = D::select(b0, c.le(zero), all_d());
@@ -216,7 +220,7 @@ fn cone<D: D8>(o: &[D; 3], d: &[D; 3], ra: f64, rb: f64) -> R8<D> {
     let aneg = zero.gt(a);
     let q = b.add(disc.sqrt().copysign(b)).neg();
     let q0 = q.eq(zero);
-    let mb = b.neg().div(a);
+    let mb = if q0.bitmask() != 0 { b.neg().div(a) } else { zero };
     let r0 = D::select(q0, mb, c.div(q));
     let r1 = D::select(q0, mb, q.div(a));
     let sw = r0.gt(r1);

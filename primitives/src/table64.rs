@@ -169,13 +169,30 @@ impl LeafTable {
             (LeafKind::Ellipsoid, _) => point(),
             (_, sub::CAP0) => DVec3::NEG_Z,
             (_, sub::CAP1) => DVec3::Z,
-            (kind, _) => {
+            (LeafKind::Cylinder, _) => {
+                // The gradient of |xy| - 1 times |xy|: no square root or
+                // division for a direction that `world_normal` normalises.
                 let l = point();
-                let (ra, rb) = if kind == LeafKind::Cone { self.cone_radii(iu) } else { (1.0, 1.0) };
+                if l.x == 0.0 && l.y == 0.0 {
+                    DVec3::X
+                } else {
+                    DVec3::new(l.x, l.y, 0.0)
+                }
+            }
+            (_, _) => {
+                let l = point();
+                let (ra, rb) = self.cone_radii(iu);
                 let r = ra + (rb - ra) * l.z;
-                let xy = DVec3::new(l.x, l.y, 0.0).try_normalize().unwrap_or(DVec3::X);
-                // The gradient of |xy| - r(z).
-                xy - DVec3::Z * (rb - ra) * if r >= 0.0 { 1.0 } else { -1.0 }
+                let side = (rb - ra) * if r >= 0.0 { 1.0 } else { -1.0 };
+                // The gradient of |xy| - r(z) times |xy| (no division:
+                // `world_normal` normalises; on the axis, that gradient at
+                // |xy| = 1).
+                let rho = (l.x * l.x + l.y * l.y).sqrt();
+                if rho == 0.0 {
+                    DVec3::new(1.0, 0.0, -side)
+                } else {
+                    DVec3::new(l.x, l.y, -side * rho)
+                }
             }
         };
         world_normal(&self.to_local[iu], nl.as_vec3())
