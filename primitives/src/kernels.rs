@@ -366,8 +366,37 @@ struct TorusLine {
     h: f64,
 }
 
+/// Does the line `oc + s dn` (`oc` its point nearest the centre, `dn`
+/// unit) pass through the hole of the ring torus of minor radius `rho` (in
+/// its frame: major radius 1, axis z) without meeting it: does every point
+/// with `|s| <= h` (inside the bounding sphere) and `|z| <= rho` (inside
+/// the slab, both with the slack of [`TorusLine::new`]) lie nearer the axis
+/// than `1 - rho`, within a relative margin of 1e-6? Then the quartic has no
+/// root there. Over that chord the squared distance to the axis is convex,
+/// so its ends decide. (Rays through the rings of a chain of tori, seen at
+/// an angle, pass the sphere and slab tests and solved a quartic each.)
+/// `torus8.rs` makes the same test on eight lanes, bit for bit.
+#[inline(always)]
+pub(crate) fn through_hole(oc: DVec3, dn: DVec3, (rho, h): (f64, f64)) -> bool {
+    // (Compares and picks, not `min` / `max`: the eight-lane version picks
+    // the same way, NaN included.)
+    let slab = rho * (1.0 + 1e-9);
+    let (sa, sb) = ((-slab - oc.z) / dn.z, (slab - oc.z) / dn.z);
+    let (s0, s1) = if sa < sb { (sa, sb) } else { (sb, sa) };
+    let flat = dn.z == 0.0;
+    let lo = if flat || !(s0 > -h) { -h } else { s0 };
+    let hi = if flat || !(s1 < h) { h } else { s1 };
+    let q = |s: f64| {
+        let (x, y) = (oc.x + s * dn.x, oc.y + s * dn.y);
+        x * x + y * y
+    };
+    let inner = (1.0 - rho) * (1.0 - rho) * (1.0 - 1e-6);
+    q(lo) < inner && q(hi) < inner
+}
+
 impl TorusLine {
-    /// `None` when the line misses the torus's bounding sphere or slab.
+    /// `None` when the line misses the torus's bounding sphere or slab, or
+    /// passes through its hole ([`through_hole`]).
     #[inline(always)]
     fn new(o: DVec3, d: DVec3, rho: f64) -> Option<TorusLine> {
         let dl = d.length();
@@ -388,6 +417,9 @@ impl TorusLine {
         // is skipped. (A thin torus fills little of its sphere.)
         let zr = dn.z.abs() * h;
         if oc.z - zr > rho * (1.0 + 1e-9) || oc.z + zr < -rho * (1.0 + 1e-9) {
+            return None;
+        }
+        if through_hole(oc, dn, (rho, h)) {
             return None;
         }
         Some(TorusLine { dl, dn, tc, oc, h })

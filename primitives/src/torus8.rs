@@ -93,6 +93,27 @@ fn polish<D: D8>((p, r, m): (D, D, D), s: D) -> D {
     D::select(abs(n.sub(s)).le(D::splat(0.5).mul(abs(abs(s).sub(m)))), n, s)
 }
 
+/// `kernels::through_hole` on eight lanes: the same operations in the same
+/// order, its picks as selects (bit k of the mask: lane k's line passes
+/// through the hole).
+#[inline(always)]
+fn through_hole8<D: D8>((oc, dn): (&[D; 3], &[D; 3]), (rho, h): (f64, D)) -> u32 {
+    let slab = rho * (1.0 + 1e-9);
+    let (sa, sb) = (D::splat(-slab).sub(oc[2]).div(dn[2]), D::splat(slab).sub(oc[2]).div(dn[2]));
+    let lt = sb.gt(sa);
+    let (s0, s1) = (D::select(lt, sa, sb), D::select(lt, sb, sa));
+    let flat = dn[2].eq(D::splat(0.0));
+    let nh = h.neg();
+    let lo = D::select(flat, nh, D::select(s0.gt(nh), s0, nh));
+    let hi = D::select(flat, h, D::select(h.gt(s1), s1, h));
+    // (No closure: one compiled apart from the AVX function made each of
+    // its operations a call.)
+    let (xl, yl) = (oc[0].add(lo.mul(dn[0])), oc[1].add(lo.mul(dn[1])));
+    let (xh, yh) = (oc[0].add(hi.mul(dn[0])), oc[1].add(hi.mul(dn[1])));
+    let inner = D::splat((1.0 - rho) * (1.0 - rho) * (1.0 - 1e-6));
+    inner.gt(xl.mul(xl).add(yl.mul(yl))).and(inner.gt(xh.mul(xh).add(yh.mul(yh)))).bitmask()
+}
+
 /// [`TorusPrep::new`] for the local lines `o + t d` of the lanes `lanes`
 /// (`None` for the others and where a line misses the torus's bounding
 /// sphere or slab), torus minor radius `rho < 1`.
@@ -111,7 +132,7 @@ pub(crate) fn torus_prep8_in<D: D8>(o: &[D; 3], d: &[D; 3], (rho, tol): (f64, f6
     let zr = abs(dn[2]).mul(h);
     let (above, below) = (D::splat(rho * (1.0 + 1e-9)), D::splat(-rho * (1.0 + 1e-9)));
     let miss = h2.le(zero).bitmask() | oc[2].sub(zr).gt(above).bitmask() | below.gt(oc[2].add(zr)).bitmask();
-    let live = lanes & dl.gt(zero).bitmask() & !miss;
+    let live = lanes & dl.gt(zero).bitmask() & !miss & !through_hole8((&oc, &dn), (rho, h));
     if live == 0 {
         *out = [None; 8];
         return;
