@@ -150,25 +150,37 @@ pub(crate) fn torus_prep8_in<D: D8>(o: &[D; 3], d: &[D; 3], (rho, tol): (f64, f6
     let disc = r2.mul(r2).add(p3.mul(p3).mul(p3));
     let one = disc.gt(zero);
     let one_bits = one.bitmask() & live;
+    // Each branch only where a live lane takes it (packets are mostly of
+    // one kind; the other branch's divisions and square roots were read by
+    // no lane). A lane reads only its own branch's values below.
     // One real root (Cardano), then a Newton step where the slope is not 0.
-    let u = per_lane(r2.add(disc.sqrt().copysign(r2)).neg(), one_bits, quartic::cbrt);
-    let s = u.sub(p3.div(u));
-    let (gs, ds) = cubic(p, r, s);
-    let root = D::select(ds.eq(zero), s, s.sub(gs.div(ds)));
+    let root = if one_bits != 0 {
+        let u = per_lane(r2.add(disc.sqrt().copysign(r2)).neg(), one_bits, quartic::cbrt);
+        let s = u.sub(p3.div(u));
+        let (gs, ds) = cubic(p, r, s);
+        D::select(ds.eq(zero), s, s.sub(gs.div(ds)))
+    } else {
+        zero
+    };
     // Three real roots: the trigonometric form, each polished by a Newton
     // step that moves it less than half its distance to the nearest extremum.
     let three_bits = live & !one_bits;
-    let m = p3.neg().sqrt();
-    let ratio = r2.neg().div(m.mul(m).mul(m));
-    let (neg1, pos1) = (D::splat(-1.0), D::splat(1.0));
-    let clamped = D::select(neg1.gt(ratio), neg1, ratio);
-    let clamped = D::select(clamped.gt(pos1), pos1, clamped);
-    let c3 = D::select(m.gt(zero), clamped, zero);
-    let (sn, cs) = sin_cos_third_acos(c3, three_bits);
-    const SQRT3: f64 = 1.732_050_807_568_877_2;
-    let hi = polish((p, r, m), D::splat(2.0).mul(m).mul(cs));
-    let lo = polish((p, r, m), m.neg().mul(cs.add(D::splat(SQRT3).mul(sn))));
-    let mid = polish((p, r, m), m.mul(D::splat(SQRT3).mul(sn).sub(cs)));
+    let (lo, mid, hi) = if three_bits != 0 {
+        let m = p3.neg().sqrt();
+        let ratio = r2.neg().div(m.mul(m).mul(m));
+        let (neg1, pos1) = (D::splat(-1.0), D::splat(1.0));
+        let clamped = D::select(neg1.gt(ratio), neg1, ratio);
+        let clamped = D::select(clamped.gt(pos1), pos1, clamped);
+        let c3 = D::select(m.gt(zero), clamped, zero);
+        let (sn, cs) = sin_cos_third_acos(c3, three_bits);
+        const SQRT3: f64 = 1.732_050_807_568_877_2;
+        let hi = polish((p, r, m), D::splat(2.0).mul(m).mul(cs));
+        let lo = polish((p, r, m), m.neg().mul(cs.add(D::splat(SQRT3).mul(sn))));
+        let mid = polish((p, r, m), m.mul(D::splat(SQRT3).mul(sn).sub(cs)));
+        (lo, mid, hi)
+    } else {
+        (zero, zero, zero)
+    };
     // The marks strictly inside (-h, h), increasing, each past the last kept.
     let b0 = D::select(one, root, lo);
     let nh = h.neg();
