@@ -368,7 +368,8 @@ struct TorusLine {
 
 /// Does the line `oc + s dn` (`oc` its point nearest the centre, `dn`
 /// unit) pass through the hole of the ring torus of minor radius `rho` (in
-/// its frame: major radius 1, axis z) without meeting it: does every point
+/// its frame: major radius 1, axis z; `rho < 1`, else there is no hole)
+/// without meeting it: does every point
 /// with `|s| <= h` (inside the bounding sphere) and `|z| <= rho` (inside
 /// the slab, both with the slack of [`TorusLine::new`]) lie nearer the axis
 /// than `1 - rho`, within a relative margin of 1e-6? Then the quartic has no
@@ -378,6 +379,10 @@ struct TorusLine {
 /// `torus8.rs` makes the same test on eight lanes, bit for bit.
 #[inline(always)]
 pub(crate) fn through_hole(oc: DVec3, dn: DVec3, (rho, h): (f64, f64)) -> bool {
+    if !(rho < 1.0) {
+        // A spindle or horn torus has no hole: near its axis is inside.
+        return false;
+    }
     // (Compares and picks, not `min` / `max`: the eight-lane version picks
     // the same way, NaN included.)
     let slab = rho * (1.0 + 1e-9);

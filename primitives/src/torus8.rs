@@ -98,6 +98,9 @@ fn polish<D: D8>((p, r, m): (D, D, D), s: D) -> D {
 /// through the hole).
 #[inline(always)]
 fn through_hole8<D: D8>((oc, dn): (&[D; 3], &[D; 3]), (rho, h): (f64, D)) -> u32 {
+    if !(rho < 1.0) {
+        return 0;
+    }
     let slab = rho * (1.0 + 1e-9);
     let (sa, sb) = (D::splat(-slab).sub(oc[2]).div(dn[2]), D::splat(slab).sub(oc[2]).div(dn[2]));
     let lt = sb.gt(sa);

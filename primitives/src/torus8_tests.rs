@@ -166,4 +166,15 @@ fn lines_culled_through_the_hole_miss_the_torus() {
     }
     println!("{culled} culled, {kept} kept ({kept_hitting} of them meet the torus)");
     assert!(culled > 2000 && kept_hitting > 2000, "seed {seed}: too few lines of a kind");
+    // A spindle or horn torus (rho >= 1) has no hole: the points near its
+    // axis are inside, and no line is culled (a cull there broke
+    // tests/stress.rs `torus_ratios` at ratios 1e3 to 1e20).
+    for i in 0..2000 {
+        let rho = [1.0, 1.5, 10.0, 1e3][i % 4];
+        let p = DVec3::new(rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1), rng.gen_range(-1.0..1.0) * rho);
+        let Some(dn) = DVec3::new(rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1), 1.0).try_normalize() else { continue };
+        let oc = p - dn * p.dot(dn);
+        let h = ((1.0 + rho) * (1.0 + rho) - oc.length_squared()).sqrt();
+        assert!(!crate::kernels::through_hole(oc, dn, (rho, h)), "seed {seed}: a line near the axis of a torus of rho {rho} culled");
+    }
 }
