@@ -369,9 +369,9 @@ struct TorusLine {
 /// Does the line `oc + s dn` (`oc` its point nearest the centre, `dn`
 /// unit) pass through the hole of the ring torus of minor radius `rho` (in
 /// its frame: major radius 1, axis z; `rho < 1`, else there is no hole)
-/// without meeting it: does every point
-/// with `|s| <= h` (inside the bounding sphere) and `|z| <= rho` (inside
-/// the slab, both with the slack of [`TorusLine::new`]) lie nearer the axis
+/// without meeting it: does every point with `|s| <= h` (inside the
+/// bounding sphere) and `|z| <= rho` (inside the slab, both with the slack
+/// of [`TorusLine::new`]) lie nearer the axis
 /// than `1 - rho`, within a relative margin of 1e-6? Then the quartic has no
 /// root there. Over that chord the squared distance to the axis is convex,
 /// so its ends decide. (Rays through the rings of a chain of tori, seen at
