@@ -15,6 +15,12 @@
 //!   through the packet kernel ([`LeafTable::ranges8`], AVX when the CPU has
 //!   it; SSE2 forced) for the kinds that have one (sphere, box, cylinder,
 //!   half-space); per ray as well.
+//! * `leaf/KIND x8 beside`: packets of eight of those rays that all miss
+//!   the leaf (the common solve in a forest, where the lanes meeting a
+//!   child's box pass beside it), through [`LeafTable::ranges8`]; per ray.
+//!   `... pretest` (and `x8 packet pretest`): through
+//!   [`LeafTable::ranges8_beside`], whose miss pretests answer such packets
+//!   without solving (and cost the others their time).
 //! * `combine/OP/N`: [`combine`] of two lists of N spans each (1, 2, 4, 8),
 //!   for union, intersection and difference; per call, not per ray.
 //! * `wide_union/...`: a ground box and a union of 3000 small spheres (like
@@ -190,7 +196,42 @@ fn leaf_kernels(c: &mut Criterion) {
             });
         };
         packet_bench("x8 packet", &|p, r| leaves.ranges8(i, p, 0xff, r));
+        packet_bench("x8 packet pretest", &|p, r| leaves.ranges8_beside(i, p, 0xff, r));
         packet_bench("x8 packet sse2", &|p, r| leaves.ranges8_sse(i, p, 0xff, r));
+        // Packets of the rays that miss the leaf, as most of a forest's
+        // solves are (every lane meeting the child's box passes beside it):
+        // what the kernels' miss pretests answer without solving.
+        let beside: Vec<&Ray> = rays
+            .iter()
+            .filter(|r| {
+                out.clear();
+                leaves.spans(i, r, &mut out);
+                out.is_empty()
+            })
+            .collect();
+        let missing: Vec<Rays8Soa> = beside
+            .chunks_exact(8)
+            .map(|c| Rays8Soa::new(&std::array::from_fn(|k| c[k].origin), &std::array::from_fn(|k| c[k].dir)))
+            .collect();
+        println!("leaf/{name} x8 beside: {} packets of 8 rays that miss; ns per ray = time / {}", missing.len(), 8 * missing.len());
+        g.throughput(Throughput::Elements(8 * missing.len() as u64));
+        for (label, pretest) in [("x8 beside", false), ("x8 beside pretest", true)] {
+            g.bench_function(format!("{name} {label}"), |bch| {
+                bch.iter(|| {
+                    let mut n = 0u32;
+                    for p in &missing {
+                        if pretest {
+                            leaves.ranges8_beside(i, black_box(p), 0xff, &mut r8);
+                        } else {
+                            leaves.ranges8(i, black_box(p), 0xff, &mut r8);
+                        }
+                        n += r8.hit.count_ones();
+                    }
+                    n
+                })
+            });
+        }
+        g.throughput(Throughput::Elements(LEAF_RAYS as u64));
     }
     g.finish();
 }

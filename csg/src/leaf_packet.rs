@@ -19,7 +19,7 @@ use rothray_primitives::{
     box_wide::BoxTest8,
     glam::Vec3,
     kernels::TorusPrep,
-    kernels8::{Ranges8, Rays8Soa},
+    kernels8::{BesideOdds, Ranges8, Rays8Soa},
     table::{push_clipped, LeafTable},
     Span, SpanSink, Surf,
 };
@@ -54,6 +54,8 @@ pub(crate) struct LeafRecords {
     tori: Vec<(u32, u32, [Option<TorusPrep>; 8])>,
     /// The entries of one tile list that the packet's rays meet.
     list_met: ListMet,
+    /// Whether the leaves' miss pretests pay (kept from packet to packet).
+    odds: [BesideOdds; 2],
 }
 
 /// [`PacketMemo::with_list_met`]'s record: one list (a tile's union of
@@ -138,11 +140,11 @@ impl PacketMemo {
         out: &mut S,
     ) -> Option<f32> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let LeafRecords { lanes, rays, generation, slots, .. } = &mut *guard;
+        let LeafRecords { lanes, rays, generation, slots, odds, .. } = &mut *guard;
         if *lanes & (1 << k) == 0 {
             return None;
         }
-        let e = &*record(slots, i, *generation, |e| solve8(leaves, i, rays, *lanes, e));
+        let e = &*record(slots, i, *generation, |e| solve8::<false>(leaves, i, rays, *lanes, e, odds));
         let done = e.done & (1 << k) != 0;
         counts::leaf_lane(done);
         if !done {
@@ -190,13 +192,13 @@ impl PacketMemo {
     /// packet kernel) for every lane, from its record (made now when no lane
     /// asked before), or `None` when the packet solves no leaves.
     #[inline(always)]
-    pub(crate) fn with_solve<R>(&self, leaves: &LeafTable, i: u32, f: impl FnOnce(&Ranges8) -> R) -> Option<R> {
+    pub(crate) fn with_solve<const BESIDE: bool, R>(&self, leaves: &LeafTable, i: u32, f: impl FnOnce(&Ranges8) -> R) -> Option<R> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let LeafRecords { lanes, rays, generation, slots, .. } = &mut *guard;
+        let LeafRecords { lanes, rays, generation, slots, odds, .. } = &mut *guard;
         if *lanes == 0 {
             return None;
         }
-        Some(f(record(slots, i, *generation, |e| solve8(leaves, i, rays, *lanes, e))))
+        Some(f(record(slots, i, *generation, |e| solve8::<BESIDE>(leaves, i, rays, *lanes, e, odds))))
     }
 }
 
@@ -205,9 +207,14 @@ impl PacketMemo {
     /// reads both records where they lie (copying them out was 2% of
     /// benches/scenes/forest_cut's cycles, in `memmove`, perf).
     #[inline(always)]
-    pub(crate) fn with_solves2<R>(&self, leaves: &LeafTable, (i, j): (u32, u32), f: impl FnOnce(&Ranges8, &Ranges8) -> R) -> Option<R> {
+    pub(crate) fn with_solves2<const BESIDE: bool, R>(
+        &self,
+        leaves: &LeafTable,
+        (i, j): (u32, u32),
+        f: impl FnOnce(&Ranges8, &Ranges8) -> R,
+    ) -> Option<R> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let LeafRecords { lanes, rays, generation, slots, .. } = &mut *guard;
+        let LeafRecords { lanes, rays, generation, slots, odds, .. } = &mut *guard;
         if *lanes == 0 {
             return None;
         }
@@ -215,11 +222,11 @@ impl PacketMemo {
         let mask = slots.len() - 1;
         if i as usize & mask == j as usize & mask && i != j {
             // One slot for both (rare): the first one copied.
-            let a = *record(slots, i, generation, |e| solve8(leaves, i, rays, lanes, e));
-            return Some(f(&a, record(slots, j, generation, |e| solve8(leaves, j, rays, lanes, e))));
+            let a = *record(slots, i, generation, |e| solve8::<BESIDE>(leaves, i, rays, lanes, e, odds));
+            return Some(f(&a, record(slots, j, generation, |e| solve8::<BESIDE>(leaves, j, rays, lanes, e, odds))));
         }
-        record(slots, i, generation, |e| solve8(leaves, i, rays, lanes, e));
-        record(slots, j, generation, |e| solve8(leaves, j, rays, lanes, e));
+        record(slots, i, generation, |e| solve8::<BESIDE>(leaves, i, rays, lanes, e, odds));
+        record(slots, j, generation, |e| solve8::<BESIDE>(leaves, j, rays, lanes, e, odds));
         Some(f(&slots[i as usize & mask].2, &slots[j as usize & mask].2))
     }
 }
@@ -231,9 +238,14 @@ impl PacketMemo {
     /// solves no leaves. (Copied out one by one, the records of a forest's
     /// two-level trees were 5% of its cycles in `memmove`, perf.)
     #[inline(always)]
-    pub(crate) fn with_solves_n<R>(&self, leaves: &LeafTable, ids: &[u32], f: impl FnOnce(&[&Ranges8]) -> R) -> Option<R> {
+    pub(crate) fn with_solves_n<const BESIDE: bool, R>(
+        &self,
+        leaves: &LeafTable,
+        ids: &[u32],
+        f: impl FnOnce(&[&Ranges8]) -> R,
+    ) -> Option<R> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let LeafRecords { lanes, rays, generation, slots, .. } = &mut *guard;
+        let LeafRecords { lanes, rays, generation, slots, odds, .. } = &mut *guard;
         if *lanes == 0 {
             return None;
         }
@@ -243,7 +255,7 @@ impl PacketMemo {
             return Some(f(&[]));
         }
         for &i in &ids[..n] {
-            record(slots, i, generation, |e| solve8(leaves, i, rays, lanes, e));
+            record(slots, i, generation, |e| solve8::<BESIDE>(leaves, i, rays, lanes, e, odds));
         }
         let mask = slots.len() - 1;
         let at = |i: u32| &slots[i as usize & mask];
@@ -254,7 +266,7 @@ impl PacketMemo {
         // Two leaves in one slot (rare): each solve copied.
         let mut copies = [Ranges8::default(); TREE_LEAVES];
         for (c, &i) in copies.iter_mut().zip(&ids[..n]) {
-            *c = *record(slots, i, generation, |e| solve8(leaves, i, rays, lanes, e));
+            *c = *record(slots, i, generation, |e| solve8::<BESIDE>(leaves, i, rays, lanes, e, odds));
         }
         let r: [&Ranges8; TREE_LEAVES] = std::array::from_fn(|j| &copies[j]);
         Some(f(&r[..n]))
@@ -282,9 +294,12 @@ fn met_slabs(list: &TileList, rec: &mut ListMet, (o, d): (&[Vec3; 8], &[Vec3; 8]
 /// instructions of entry, exit and look-up each (callgrind, 480x270, flat:
 /// logo -1.3%, capsules -1.4%, fill -1.6%, ground -2.7%; lit -1.1% to
 /// -1.8% on those; forest, meshes and sweeps within 0.3%).
+/// With the odds of the solve's callers: `BESIDE` for a wide union's
+/// children, the others for objects and single lanes (their shares of
+/// solves with every lane missing differ; see [`BesideOdds`]).
 #[inline(never)]
-fn solve8(leaves: &LeafTable, i: u32, rays: &Rays8Soa, lanes: u32, e: &mut Ranges8) {
-    leaves.ranges8(i, rays, lanes, e)
+fn solve8<const BESIDE: bool>(leaves: &LeafTable, i: u32, rays: &Rays8Soa, lanes: u32, e: &mut Ranges8, odds: &mut [BesideOdds; 2]) {
+    odds[BESIDE as usize].solve(leaves, i, rays, lanes, e)
 }
 
 /// Leaf `i`'s record for this packet in the direct-mapped `table` (of a

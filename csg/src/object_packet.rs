@@ -75,12 +75,12 @@ impl PacketMemo {
         let nu = n as usize;
         if prog.kind[nu] == NodeKind::Leaf {
             let leaf = prog.first[nu];
-            return self.with_solve(leaves, leaf, |r| leaf_firsts(r, leaf, lanes, ray, out)).is_some();
+            return self.with_solve::<false, _>(leaves, leaf, |r| leaf_firsts(r, leaf, lanes, ray, out)).is_some();
         }
         if !prog.leafy[nu] {
             let Some(t) = TreeShape::of(prog, nu) else { return false };
             return self
-                .with_solves_n(leaves, &t.leaf[..t.count], |r| {
+                .with_solves_n::<false, _>(leaves, &t.leaf[..t.count], |r| {
                     let done = lanes & done_by(r);
                     let mut f = [SmallFirst::Empty; 8];
                     tree_first8(&t, r, done, &LaneStarts { lo: ray.tmin, eps: ray.eps }, &mut f);
@@ -89,7 +89,7 @@ impl PacketMemo {
                 .is_some();
         }
         let mut ops = SmallOps::<OBJECT_OPS>::of(prog, nu);
-        if !ops.gather(prog, nu, |leaf| self.with_solve(leaves, leaf, |r| *r)) {
+        if !ops.gather(prog, nu, |leaf| self.with_solve::<false, _>(leaves, leaf, |r| *r)) {
             return false;
         }
         firsts_of(lanes & ops.done, lanes, ray, out, |k| small_first::<OBJECT_OPS, { 2 * OBJECT_OPS }>(&ops, k, (ray.tmin[k], ray.eps[k])));

@@ -285,7 +285,7 @@ impl FirstWalk<'_> {
                         break;
                     }
                     let (memo, leaves) = (self.memo, self.leaves);
-                    let solved = memo.with_solve(leaves, leaf, |r| self.take(leaf, m, r, &tbox));
+                    let solved = memo.with_solve::<true, _>(leaves, leaf, |r| self.take(leaf, m, r, &tbox));
                     if solved.is_none() {
                         let r = self.solve_here(leaf);
                         self.take(leaf, m, &r, &tbox);
@@ -317,7 +317,7 @@ impl FirstWalk<'_> {
     fn solve_here(&mut self, leaf: u32) -> Ranges8 {
         counts::leaf_solve();
         let mut r = Ranges8::default();
-        self.leaves.ranges8(leaf, &self.soa, self.live, &mut r);
+        self.leaves.ranges8_beside(leaf, &self.soa, self.live, &mut r);
         r
     }
 
@@ -344,7 +344,8 @@ impl FirstWalk<'_> {
         let first = prog.first[c] as usize;
         let leaf = [0, 1].map(|j| prog.first[prog.children[first + j] as usize]);
         let kind = prog.kind[c];
-        let taken = memo.with_solves2(leaves, (leaf[0], leaf[1]), |r0, r1| self.take_two(&Two { kind, leaf, r: [r0, r1] }, m, tbox));
+        let taken =
+            memo.with_solves2::<true, _>(leaves, (leaf[0], leaf[1]), |r0, r1| self.take_two(&Two { kind, leaf, r: [r0, r1] }, m, tbox));
         if taken.is_none() {
             let mut ops = SmallOps::<2>::of(prog, c);
             ops.gather(prog, c, |leaf| Some(self.solve_here(leaf)));
@@ -404,7 +405,7 @@ impl FirstWalk<'_> {
     fn take_small_n<const N: usize, const E: usize>(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
         let (prog, memo, leaves) = (self.prog, self.memo, self.leaves);
         let mut ops = SmallOps::<N>::of(prog, c);
-        ops.gather(prog, c, |leaf| Some(memo.with_solve(leaves, leaf, |r| *r).unwrap_or_else(|| self.solve_here(leaf))));
+        ops.gather(prog, c, |leaf| Some(memo.with_solve::<true, _>(leaves, leaf, |r| *r).unwrap_or_else(|| self.solve_here(leaf))));
         let mut lanes = m & ops.done;
         // A lane that a solve left undone goes the walk's way.
         self.live &= !(m & !lanes);
@@ -428,7 +429,7 @@ impl FirstWalk<'_> {
             return;
         };
         let (memo, leaves) = (self.memo, self.leaves);
-        let taken = memo.with_solves_n(leaves, &t.leaf[..t.count], |r| self.take_tree_solved(&t, r, m, tbox));
+        let taken = memo.with_solves_n::<true, _>(leaves, &t.leaf[..t.count], |r| self.take_tree_solved(&t, r, m, tbox));
         if taken.is_none() {
             let mut solves = [Ranges8::default(); TREE_LEAVES];
             for (r, &leaf) in solves.iter_mut().zip(&t.leaf[..t.count]) {

@@ -42,6 +42,59 @@ pub struct Ranges8 {
     pub s1: [u32; 8],
 }
 
+/// Whether [`LeafTable::ranges8_beside`] pays, per leaf kind, learned from
+/// the solves' answers: a score that rises by the time a pretest saves on
+/// a solve whose lanes all miss and falls by what it costs on one that some
+/// lane meets (their ratio from `cargo bench --bench kernels --
+/// "x8 (packet|beside)"`: for a ball it saves ten times what it costs, for
+/// a cylinder about as much, for a cone 3 to 2). The pretests run while the
+/// score is positive. Either way the answers are the same bits; only the
+/// time differs. (The share of solves with every lane missing is some 70%
+/// on a forest's children and small objects such as capsules, near none on
+/// large objects: a fixed choice cost logo 2-3% or capsules 2.5%.)
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BesideOdds([i16; 16]);
+
+impl BesideOdds {
+    /// The score's bounds (how long a change of scene takes to turn it).
+    const LIMIT: i16 = 64;
+
+    /// Do the pretests run for leaves of `kind` now? (For tests.)
+    #[doc(hidden)]
+    pub fn pays(&self, kind: LeafKind) -> bool {
+        beside_weights(kind).is_some() && self.0[kind as usize & 15] > 0
+    }
+
+    /// [`LeafTable::ranges8_beside`] or [`LeafTable::ranges8`] of leaf `i`,
+    /// as the score of its kind says, into `out`; then the score learns
+    /// from the answer.
+    #[inline(always)]
+    pub fn solve(&mut self, leaves: &LeafTable, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        let kind = leaves.kind[i as usize];
+        let Some((gain, cost)) = beside_weights(kind) else {
+            return leaves.ranges8(i, rays, lanes, out);
+        };
+        let s = &mut self.0[kind as usize & 15];
+        if *s > 0 {
+            leaves.ranges8_beside(i, rays, lanes, out);
+        } else {
+            leaves.ranges8(i, rays, lanes, out);
+        }
+        *s = if out.hit & lanes == 0 { (*s + gain).min(Self::LIMIT) } else { (*s - cost).max(-Self::LIMIT) };
+    }
+}
+
+/// What a kind's miss pretest saves on a solve whose lanes all miss, and
+/// what it costs on another, in the same unit (see [`BesideOdds`]); `None`
+/// for the kinds without one.
+fn beside_weights(kind: LeafKind) -> Option<(i16, i16)> {
+    match kind {
+        LeafKind::Sphere => Some((10, 1)),
+        LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone => Some((1, 1)),
+        _ => None,
+    }
+}
+
 impl Ranges8 {
     /// The answer where every lane of `lanes` misses the leaf (the
     /// parameters are not read).
@@ -442,17 +495,35 @@ impl LeafTable {
     /// bit, for the lanes it marks done.
     #[inline]
     pub fn ranges8(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        self.ranges8_with::<false>(i, rays, lanes, out)
+    }
+
+    /// [`LeafTable::ranges8`] for lanes likely to pass beside the leaf (a
+    /// wide union's child or a small object whose box they meet): the same
+    /// answers, told at once without solving when the miss pretests
+    /// ([`side_slab_miss`], [`ball_miss`]) find every lane a miss. Those
+    /// cost a cylinder's solve a third more where some lane is solved
+    /// (`cargo bench --bench kernels -- "leaf/cylinder x8"`), and save a
+    /// third to a half where none is: [`BesideOdds`] tells when they pay.
+    #[inline]
+    pub fn ranges8_beside(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        self.ranges8_with::<true>(i, rays, lanes, out)
+    }
+
+    /// [`LeafTable::ranges8`], with the miss pretests when `BESIDE`.
+    #[inline(always)]
+    fn ranges8_with<const BESIDE: bool>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the CPU has AVX-512F.
-                return unsafe { self.ranges8_avx512(i, rays, lanes, out) };
+                return unsafe { self.ranges8_avx512::<BESIDE>(i, rays, lanes, out) };
             }
             if std::arch::is_x86_feature_detected!("avx") {
                 // SAFETY: the CPU has AVX.
-                return unsafe { self.ranges8_avx(i, rays, lanes, out) };
+                return unsafe { self.ranges8_avx::<BESIDE>(i, rays, lanes, out) };
             }
-            self.ranges8_in::<sse_d::SseD>(i, rays, lanes, out)
+            self.ranges8_in::<sse_d::SseD, BESIDE>(i, rays, lanes, out)
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
@@ -466,7 +537,7 @@ impl LeafTable {
     #[doc(hidden)]
     #[cfg(target_arch = "x86_64")]
     pub fn ranges8_sse(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
-        self.ranges8_in::<sse_d::SseD>(i, rays, lanes, out)
+        self.ranges8_in::<sse_d::SseD, false>(i, rays, lanes, out)
     }
 
     /// [`LeafTable::ranges8`] with two AVX registers per value, for tests
@@ -478,7 +549,7 @@ impl LeafTable {
             return false;
         }
         // SAFETY: the CPU has AVX.
-        unsafe { self.ranges8_avx(i, rays, lanes, out) };
+        unsafe { self.ranges8_avx::<false>(i, rays, lanes, out) };
         true
     }
 
@@ -486,14 +557,14 @@ impl LeafTable {
     /// the CPU has AVX-512F: half the instructions of two AVX registers).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    unsafe fn ranges8_avx512(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
-        self.ranges8_in::<avx512_d::Avx512D>(i, rays, lanes, out)
+    unsafe fn ranges8_avx512<const BESIDE: bool>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        self.ranges8_in::<avx512_d::Avx512D, BESIDE>(i, rays, lanes, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn ranges8_avx(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
-        self.ranges8_in::<avx_d::AvxD>(i, rays, lanes, out)
+    unsafe fn ranges8_avx<const BESIDE: bool>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+        self.ranges8_in::<avx_d::AvxD, BESIDE>(i, rays, lanes, out)
     }
 
     /// [`LeafTable::torus_prep8`] with two AVX registers per value.
@@ -534,11 +605,13 @@ impl LeafTable {
     }
 
     #[inline(always)]
-    fn ranges8_in<D: D8>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+    fn ranges8_in<D: D8, const BESIDE: bool>(&self, i: u32, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let iu = i as usize;
         match self.kind[iu] {
-            LeafKind::Sphere => self.balls8::<D>(iu, rays, lanes, out),
-            LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Cuboid => self.quadrics8::<D>(iu, rays, lanes, out),
+            LeafKind::Sphere => self.balls8::<D, BESIDE>(iu, rays, lanes, out),
+            LeafKind::Ellipsoid | LeafKind::Cylinder | LeafKind::Cone | LeafKind::Cuboid => {
+                self.quadrics8::<D, BESIDE>(iu, rays, lanes, out)
+            }
             LeafKind::HalfSpace => self.planes8::<D>(iu, rays, lanes, out),
             _ => unreachable!("no packet kernel for {:?}", self.kind[iu]),
         }
@@ -619,14 +692,12 @@ impl LeafTable {
     /// closures here: one compiled apart from this AVX function made every
     /// AVX operation a call, 10x the instructions.)
     #[inline(always)]
-    fn quadrics8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+    fn quadrics8<D: D8, const BESIDE: bool>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let (lo, ld) = self.local_lines::<D>(iu, rays);
         // Most solves in a forest have no lane meeting the leaf (those that
         // meet its box pass beside it): told here without the divisions
-        // and square root the solve waits on. (Forest flat, one thread:
-        // 1.1% fewer instructions, some 2% less time; capsules 1% more
-        // instructions, 2% less time.)
-        if self.quadric_misses(iu, &lo, &ld).bitmask() & lanes == lanes {
+        // and square root the solve waits on (see `ranges8_beside`).
+        if BESIDE && self.quadric_misses(iu, &lo, &ld).bitmask() & lanes == lanes {
             *out = Ranges8::missed(lanes);
             return;
         }
@@ -666,9 +737,9 @@ impl LeafTable {
     /// path's `ball_spans`: in f64 from the f32 world ray and the ball's f32
     /// centre and radius (no map, no rescaling: every lane is done).
     #[inline(always)]
-    fn balls8<D: D8>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
+    fn balls8<D: D8, const BESIDE: bool>(&self, iu: usize, rays: &Rays8Soa, lanes: u32, out: &mut Ranges8) {
         let (o, d, r) = self.ball_lines::<D>(iu, rays);
-        if ball_miss(&o, &d, D::splat(r * r)).bitmask() & lanes == lanes {
+        if BESIDE && ball_miss(&o, &d, D::splat(r * r)).bitmask() & lanes == lanes {
             *out = Ranges8::missed(lanes);
             return;
         }

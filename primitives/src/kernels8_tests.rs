@@ -252,9 +252,10 @@ fn packet_cones_match_the_scalar_cone_along_generators() {
 /// cylinder and cone (found by bisection between a line through the
 /// leaf and one far beside it, on the scalar `spans_in`: silhouettes,
 /// rims, apexes) are nudged by 1e-2 to 1e-7 of the leaf's size either
-/// way; each goes as a packet of eight copies, so that the kernel answers
-/// without solving exactly where the pretest calls it a miss, and is
-/// compared with `spans_in` bit for bit. And the pretests are not idle:
+/// way; each goes as a packet of eight copies through `ranges8_beside`, so
+/// that the kernel answers without solving exactly where the pretest calls
+/// it a miss, and is compared with `spans_in` and with the builds that
+/// solve every packet (`ranges8_sse`, `ranges8_avx2`) bit for bit. And the pretests are not idle:
 /// they call most lines that pass 1e-2 beside a leaf misses.
 #[test]
 fn miss_pretests_never_drop_a_hit() {
@@ -314,7 +315,7 @@ fn miss_pretests_never_drop_a_hit() {
                     let oe = o + s * u;
                     let rays = Rays8Soa::new(&[oe; 8], &[d; 8]);
                     let mut got8 = Ranges8::default();
-                    t.ranges8(0, &rays, 0xff, &mut got8);
+                    t.ranges8_beside(0, &rays, 0xff, &mut got8);
                     builds_agree(&t, 0, (&rays, 0xff), &got8, &format!("round {round} offset {sign}e-{e}"));
                     let mut want: Vec<Span> = Vec::new();
                     t.spans_in(0, &Ray::new(oe, d), (f32::NEG_INFINITY, f32::INFINITY), &mut want);
@@ -340,4 +341,44 @@ fn miss_pretests_never_drop_a_hit() {
     assert_eq!(wrong, 0, "lines called misses that meet their leaf");
     assert!(compared > 20_000 && hits > 8_000);
     assert!(called * 10 > near_misses * 6 && near_misses > 1000);
+}
+
+/// `BesideOdds` turns the pretests on where most solves have every lane
+/// missing and off where most have a lane meeting the leaf, and its
+/// answers are `ranges8`'s whichever it picks: a cylinder's packets beside
+/// it, then through it, then beside it again.
+#[test]
+fn beside_odds_follow_the_solves() {
+    let seed = 0x0dd5u64;
+    println!("seed {seed:#x}");
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let mut t = LeafTable::default();
+    t.push(&LeafShape::Cylinder(Cylinder { a: Vec3::ZERO, b: Vec3::Y, radius: 0.5 }), &DAffine3::IDENTITY).unwrap();
+    let mut odds = BesideOdds::default();
+    assert!(!odds.pays(LeafKind::Cylinder), "off before any solve");
+    let packet = |beside: bool, rng: &mut SmallRng| {
+        // Lines along z at heights inside the slab, beside the side (|x| > 0.6) or through it.
+        let o: [Vec3; 8] = std::array::from_fn(|_| {
+            let x = if beside { rng.gen_range(0.6..2.0) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 } } else { rng.gen_range(-0.4..0.4) };
+            Vec3::new(x, rng.gen_range(0.1..0.9), -5.0)
+        });
+        let d: [Vec3; 8] = std::array::from_fn(|_| Vec3::new(rng.gen_range(-0.01..0.01), 0.0, 1.0));
+        Rays8Soa::new(&o, &d)
+    };
+    for (phase, beside, want) in [(0, true, true), (1, false, false), (2, true, true)] {
+        for round in 0..200 {
+            let rays = packet(beside, &mut rng);
+            let (mut got, mut plain) = (Ranges8::default(), Ranges8::default());
+            odds.solve(&t, 0, &rays, 0xff, &mut got);
+            t.ranges8(0, &rays, 0xff, &mut plain);
+            assert_eq!((got.done, got.hit), (plain.done, plain.hit), "phase {phase} round {round}");
+            for k in 0..8 {
+                if plain.hit & (1 << k) != 0 {
+                    assert_eq!((got.t0[k].to_bits(), got.t1[k].to_bits()), (plain.t0[k].to_bits(), plain.t1[k].to_bits()));
+                }
+            }
+            assert_eq!(plain.hit == 0, beside, "phase {phase} round {round}: the packet is not what it should be");
+        }
+        assert_eq!(odds.pays(LeafKind::Cylinder), want, "phase {phase}");
+    }
 }
