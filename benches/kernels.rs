@@ -14,7 +14,7 @@
 //! * `leaf/KIND x8 packet` (and `... sse2`): the same rays eight at a time
 //!   through the packet kernel ([`LeafTable::ranges8`], AVX when the CPU has
 //!   it; SSE2 forced) for the kinds that have one (sphere, box, cylinder,
-//!   half-space); per ray as well.
+//!   cone, half-space); per ray as well.
 //! * `leaf/KIND x8 beside`: packets of eight of those rays that all miss
 //!   the leaf (the common solve in a forest, where the lanes meeting a
 //!   child's box pass beside it), through [`LeafTable::ranges8`]; per ray.
@@ -38,8 +38,8 @@
 //!   the 8-lane merge ([`merge8`], lists of capacity C), eight pairs per
 //!   call; per pair, like `combine/OP/N`.
 //!
-//! Not here, because it does not exist yet: packet kernels for the cone,
-//! the torus, sweeps and generalized cylinders.
+//! Not here: the torus's packet prep (`LeafTable::torus_prep8`); sweeps and
+//! generalized cylinders have no packet kernel.
 
 use std::hint::black_box;
 use std::path::PathBuf;
