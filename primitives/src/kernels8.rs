@@ -22,7 +22,7 @@ use crate::simd8::D8;
 #[cfg(target_arch = "x86_64")]
 use crate::simd8::{avx512_d, avx_d, sse_d};
 use crate::table::{LeafKind, LeafTable};
-use crate::torus8;
+use crate::torus8::{self, dot3};
 
 /// Per lane, a leaf's unclipped range along the lane's ray (as the scalar
 /// kernel's [`crate::kernels::Range`]), where bit k of `hit` is set.
@@ -46,12 +46,13 @@ pub struct Ranges8 {
 /// the solves' answers: a score that rises by the time a pretest saves on
 /// a solve whose lanes all miss and falls by what it costs on one that some
 /// lane meets (their ratio from `cargo bench --bench kernels --
-/// "x8 (packet|beside)"`: for a ball it saves ten times what it costs, for
-/// a cylinder about as much, for a cone 3 to 2). The pretests run while the
-/// score is positive. Either way the answers are the same bits; only the
-/// time differs. (The share of solves with every lane missing is some 70%
-/// on a forest's children and small objects such as capsules, near none on
-/// large objects: a fixed choice cost logo 2-3% or capsules 2.5%.)
+/// "x8 (packet|beside)"`: for a ball it saves ten times what it costs; for
+/// a cylinder about as much, and for a cone 3 to 2, both weighed 1 to 1).
+/// The pretests run while the score is positive. Either way the answers
+/// are the same bits; only the time differs. (The share of solves with
+/// every lane missing is 53-80% on a forest's children, 56-61% on the
+/// capsules' leaves, 30-45% on logo's and gear's: always on, the pretests
+/// cost logo 1-3%; always off, they lose capsules 3%.)
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BesideOdds([i16; 16]);
 
@@ -60,8 +61,8 @@ impl BesideOdds {
     const LIMIT: i16 = 64;
 
     /// Do the pretests run for leaves of `kind` now? (For tests.)
-    #[doc(hidden)]
-    pub fn pays(&self, kind: LeafKind) -> bool {
+    #[cfg(test)]
+    fn pays(&self, kind: LeafKind) -> bool {
         beside_weights(kind).is_some() && self.0[kind as usize & 15] > 0
     }
 
@@ -132,16 +133,15 @@ impl Rays8Soa {
 /// where the line meets the ball, and the range (f64).
 #[inline(always)]
 fn ball<D: D8>(o: &[D; 3], d: &[D; 3], r: f64) -> (D, D, D) {
-    let dot = |a: &[D; 3], b: &[D; 3]| a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]));
-    let a = dot(d, d);
-    let b = dot(o, d);
+    let a = dot3(d, d);
+    let b = dot3(o, d);
     let s = b.div(a);
     let f = [o[0].sub(d[0].mul(s)), o[1].sub(d[1].mul(s)), o[2].sub(d[2].mul(s))];
     let rr = D::splat(r * r);
-    let disc = a.mul(rr.sub(dot(&f, &f)));
+    let disc = a.mul(rr.sub(dot3(&f, &f)));
     let zero = D::splat(0.0);
     let hit = disc.ge(zero);
-    let c = dot(o, o).sub(rr);
+    let c = dot3(o, o).sub(rr);
     let q = b.add(disc.sqrt().copysign(b)).neg();
     let q0 = q.eq(zero);
     let t0 = D::select(q0, zero, c.div(q));
@@ -190,12 +190,6 @@ fn positive_at<D: D8>(a: D, (bd, cd): (D, D), e: D) -> (D, D) {
     let f = aee.add(two_bd_e).add(cd);
     let m = abs8(aee).add(abs8(two_bd_e)).add(abs8(cd));
     (f.gt(D::splat(MISS_TOL).mul(m)), ae)
-}
-
-/// `a . b` in lanes, `(x + y) + z`.
-#[inline(always)]
-fn dot3<D: D8>(a: &[D; 3], b: &[D; 3]) -> D {
-    a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
 }
 
 /// The margin of the miss pretests, relative to the magnitude of the
@@ -262,10 +256,8 @@ fn and8<D: D8>(a: R8<D>, b: R8<D>) -> R8<D> {
 fn cylinder<D: D8>(o: &[D; 3], d: &[D; 3]) -> R8<D> {
     let zero = D::splat(0.0);
     let one = D::splat(1.0);
-    let a = d[0].mul(d[0]).add(d[1].mul(d[1]));
+    let (a, b, rr) = cylinder_quad(o, d);
     let axial = a.eq(zero);
-    let rr = o[0].mul(o[0]).add(o[1].mul(o[1]));
-    let b = o[0].mul(d[0]).add(o[1].mul(d[1]));
     let r = b.div(a);
     let fx = o[0].sub(d[0].mul(r));
     let fy = o[1].sub(d[1].mul(r));
@@ -286,6 +278,16 @@ fn cylinder<D: D8>(o: &[D; 3], d: &[D; 3]) -> R8<D> {
         s1: side_id,
     };
     and8(side, slab01(o[2], d[2]))
+}
+
+/// The unit cylinder's side along the lanes' lines: `a t^2 + 2 b t + rr
+/// - 1 <= 0` inside (`a = |d_xy|^2`, `b = o_xy . d_xy`, `rr = |o_xy|^2`).
+#[inline(always)]
+fn cylinder_quad<D: D8>(o: &[D; 3], d: &[D; 3]) -> (D, D, D) {
+    let a = d[0].mul(d[0]).add(d[1].mul(d[1]));
+    let b = o[0].mul(d[0]).add(o[1].mul(d[1]));
+    let rr = o[0].mul(o[0]).add(o[1].mul(o[1]));
+    (a, b, rr)
 }
 
 /// `|x|` in lanes.
@@ -636,10 +638,8 @@ impl LeafTable {
     fn quadric_misses<D: D8>(&self, iu: usize, lo: &[D; 3], ld: &[D; 3]) -> D {
         match self.kind[iu] {
             LeafKind::Cylinder => {
-                let a = ld[0].mul(ld[0]).add(ld[1].mul(ld[1]));
-                let b = lo[0].mul(ld[0]).add(lo[1].mul(ld[1]));
-                let c = lo[0].mul(lo[0]).add(lo[1].mul(lo[1])).sub(D::splat(1.0));
-                side_slab_miss(a, b, c, (lo[2], ld[2]), D::splat(0.0))
+                let (a, b, rr) = cylinder_quad(lo, ld);
+                side_slab_miss(a, b, rr.sub(D::splat(1.0)), (lo[2], ld[2]), D::splat(0.0))
             }
             LeafKind::Cone => {
                 let (ra, rb) = self.cone_radii(iu);
@@ -668,9 +668,8 @@ impl LeafTable {
     /// [`ball_miss`]) find sure to miss leaf `i` (SSE2), for tests: the
     /// packet kernels answer "no lane meets it" without solving when
     /// these are all their lanes.
-    #[doc(hidden)]
-    #[cfg(target_arch = "x86_64")]
-    pub fn sure_misses8(&self, i: u32, rays: &Rays8Soa) -> u32 {
+    #[cfg(all(test, target_arch = "x86_64"))]
+    fn sure_misses8(&self, i: u32, rays: &Rays8Soa) -> u32 {
         let iu = i as usize;
         match self.kind[iu] {
             LeafKind::Sphere => {

@@ -33,7 +33,7 @@ use crate::simd8::D8;
 
 /// `a . b` in glam's order: `(x x' + y y') + z z'`.
 #[inline(always)]
-fn dot3<D: D8>(a: &[D; 3], b: &[D; 3]) -> D {
+pub(crate) fn dot3<D: D8>(a: &[D; 3], b: &[D; 3]) -> D {
     a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
 }
 
