@@ -294,6 +294,7 @@ fn met_slabs(list: &TileList, rec: &mut ListMet, (o, d): (&[Vec3; 8], &[Vec3; 8]
 /// instructions of entry, exit and look-up each (callgrind, 480x270, flat:
 /// logo -1.3%, capsules -1.4%, fill -1.6%, ground -2.7%; lit -1.1% to
 /// -1.8% on those; forest, meshes and sweeps within 0.3%).
+///
 /// With the odds of the solve's callers: `BESIDE` for a wide union's
 /// children, the others for objects and single lanes (their shares of
 /// solves with every lane missing differ; see [`BesideOdds`]).
