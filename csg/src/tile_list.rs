@@ -81,17 +81,8 @@ impl TileList {
     /// `met`, for [`TileList::entry`]); `false` when a lane's ray is not a
     /// ray of `plane`.
     pub(crate) fn met_by(&self, plane: &RayPlane, (o, d): (&[Vec3; 8], &[Vec3; 8]), lanes: u32, met: &mut Vec<u32>) -> bool {
-        let mut pts = [[0.0f64; 2]; 8];
-        let mut n = 0;
-        for k in 0..8 {
-            if lanes & (1 << k) != 0 {
-                let Some(p) = plane.point(o[k], d[k]) else { return false };
-                pts[n] = p;
-                n += 1;
-            }
-        }
-        let pb =
-            RayPlane::points_box(pts[..n].iter().copied()).unwrap_or([f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY]);
+        let Some(pb) = plane.lanes_box((o, d), lanes) else { return false };
+        let pb = pb.unwrap_or([f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY]);
         met.clear();
         met.resize(self.pos.len(), 0);
         let m = meets_all(&pb, &self.shadows, met);
@@ -129,10 +120,13 @@ fn meets_all(pb: &Box2, [x0, y0, x1, y1]: &[Vec<f32>; 4], met: &mut [u32]) -> us
                     _mm_and_ps(_mm_cmple_ps(a0, ld(x1)), _mm_cmple_ps(ld(x0), a2)),
                     _mm_and_ps(_mm_cmple_ps(a1, ld(y1)), _mm_cmple_ps(ld(y0), a3)),
                 );
-                let bits = _mm_movemask_ps(c) as usize;
-                for b in 0..4 {
-                    met[m] = (i + b) as u32;
-                    m += (bits >> b) & 1;
+                // (Most children of a tile's list miss a packet's points:
+                // only the set bits are written.)
+                let mut bits = _mm_movemask_ps(c) as u32;
+                while bits != 0 {
+                    met[m] = (i as u32) + bits.trailing_zeros();
+                    m += 1;
+                    bits &= bits - 1;
                 }
                 i += 4;
             }

@@ -45,6 +45,7 @@
 use rothray_primitives::{
     box_wide::{Lanes8, Visit8},
     kernels8::{Ranges8, Rays8Soa},
+    mask8::{le_mask, masked_min},
     Aabb, LeafTable, Span, Surf,
 };
 
@@ -69,7 +70,58 @@ const APART: f32 = 12.0;
 
 /// A child whose box some lanes meet, waiting to be solved: the smallest
 /// of their entries, its position, the lanes and their entries.
-pub(crate) type Pending = (f32, u32, u32, [f32; 8]);
+type Pending = (f32, u32, u32, [f32; 8]);
+
+/// The children waiting to be solved, and room for their sort keys
+/// ([`cand_key`] of the smallest entry among their lanes and of their
+/// place in `items`): a walk sorts eight-byte keys, not the 44-byte
+/// entries (that sort was 3.6% of scenes/forest's cycles, perf, one
+/// thread, 1920x1080 flat), in a list kept from walk to walk (a stack
+/// array of 64 keys cleared per `settle`, and `sort_unstable`, were some
+/// 100 instructions a walk of benches/scenes/forest's union, callgrind).
+#[derive(Debug, Default)]
+pub(crate) struct PendingList {
+    items: Vec<Pending>,
+    order: Vec<u64>,
+}
+
+impl PendingList {
+    fn clear(&mut self) {
+        self.items.clear();
+        self.order.clear();
+    }
+
+    fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+
+    #[inline(always)]
+    fn push(&mut self, p: Pending) {
+        self.items.push(p);
+    }
+
+    /// The places in `items` into `order`, nearest first (by key, then
+    /// place).
+    fn sort(&mut self) {
+        self.order.clear();
+        self.order.extend(self.items.iter().enumerate().map(|(i, p)| cand_key(i as u32, p.0)));
+        let o = &mut self.order[..];
+        if o.len() <= 16 {
+            // (By hand: a handful most times.)
+            for i in 1..o.len() {
+                let x = o[i];
+                let mut j = i;
+                while j > 0 && o[j - 1] > x {
+                    o[j] = o[j - 1];
+                    j -= 1;
+                }
+                o[j] = x;
+            }
+        } else {
+            o.sort_unstable();
+        }
+    }
+}
 
 /// A lane's answer: its span list on the union (none or one span), and
 /// where it stops being exact.
@@ -105,7 +157,7 @@ pub(crate) struct FirstWalk<'a> {
     /// Children met and not solved yet, solved nearest first at each
     /// `settle` (a tile's list comes in no particular order: solved as
     /// listed, forest's camera rays solved 38% more leaves).
-    pending: &'a mut Vec<Pending>,
+    pending: &'a mut PendingList,
 }
 
 impl<'a> FirstWalk<'a> {
@@ -118,7 +170,7 @@ impl<'a> FirstWalk<'a> {
         (o, d): (&[glam::Vec3; 8], &[glam::Vec3; 8]),
         (tmin, tmax, eps): ([f32; 8], [f32; 8], [f32; 8]),
         lanes: u32,
-        pending: &'a mut Vec<Pending>,
+        pending: &'a mut PendingList,
     ) -> Self {
         pending.clear();
         let inf = [f32::INFINITY; 8];
@@ -156,31 +208,46 @@ impl<'a> FirstWalk<'a> {
         if !self.pending.is_empty() {
             self.solve_pending();
         }
-        std::array::from_fn(|k| self.lane(k))
+        if self.abort {
+            return [None; 8];
+        }
+        // All lanes' conditions at once (lane by lane, with `next_up`,
+        // they were some 70 instructions a lane on benches/scenes/forest,
+        // callgrind). With `e > 0`, `a + 4 e >= next_up(a)` is
+        // `a + 4 e > a` (a float past `a` is at least `next_up(a)`), and
+        // then `v = max(a + 4 e, next_up(a))` is `a + 4 e`.
+        let (mut settled, mut empty) = (0u32, 0u32);
+        let mut v = [0.0f32; 8];
+        for k in 0..8 {
+            let (a, e) = (self.a[k], self.eps[k]);
+            let vk = a + 4.0 * e;
+            let ok = (vk > a) & (vk < self.tmax[k]) & (self.second[k] > vk + APART * e) & (self.b[k] - a > 2.0 * e) & (self.boxt[k] <= vk);
+            settled |= (ok as u32) << k;
+            // (A child not sure of its span may still have one.)
+            empty |= (((a == f32::INFINITY) & (self.second[k] == f32::INFINITY)) as u32) << k;
+            v[k] = vk;
+        }
+        let on = self.live & self.lanes;
+        std::array::from_fn(|k| {
+            if on & (1 << k) == 0 {
+                None
+            } else if empty & (1 << k) != 0 {
+                Some((None, f32::INFINITY))
+            } else if settled & (1 << k) != 0 {
+                Some((Some(self.span(k, v[k])), v[k]))
+            } else {
+                None
+            }
+        })
     }
 
-    /// Lane `k`'s answer, when the walk settles it (see the module's notes).
-    fn lane(&self, k: usize) -> Option<LaneFirst> {
-        if self.abort || self.live & (1 << k) == 0 || self.lanes & (1 << k) == 0 {
-            return None;
-        }
-        let (a, e) = (self.a[k], self.eps[k]);
-        if a == f32::INFINITY {
-            // (A child not sure of its span may still have one.)
-            return (self.second[k] == f32::INFINITY).then_some((None, f32::INFINITY));
-        }
-        let v = (a + 4.0 * e).max(a.next_up());
-        let settled = a + 4.0 * e >= a.next_up()
-            && v < self.tmax[k]
-            && self.second[k] > v + APART * e
-            && self.b[k] - a > 2.0 * e
-            && self.boxt[k] <= v;
-        if !settled {
-            return None;
-        }
-        let cut = self.b[k] > v;
-        let span = Span { t0: a, s0: self.s0[k], t1: if cut { v } else { self.b[k] }, s1: if cut { Surf::NONE } else { self.s1[k] } };
-        Some((Some(span), v))
+    /// Lane `k`'s span on the union when the walk settles it at `v` (see
+    /// the module's notes): its first span, cut at `v`.
+    #[inline(always)]
+    fn span(&self, k: usize, v: f32) -> Span {
+        let (a, b) = (self.a[k], self.b[k]);
+        let cut = b > v;
+        Span { t0: a, s0: self.s0[k], t1: if cut { v } else { b }, s1: if cut { Surf::NONE } else { self.s1[k] } }
     }
 
     /// Takes the solve `r` of child leaf `leaf` for the lanes `m`, whose
@@ -224,11 +291,7 @@ impl Visit8 for FirstWalk<'_> {
         let (hit, tbox) = rays.ray_range(b, &self.tmin, &self.reach);
         let m = hit & lanes & self.live;
         if m != 0 {
-            let mut key = f32::INFINITY;
-            for k in 0..8 {
-                key = if m & (1 << k) != 0 { key.min(tbox[k]) } else { key };
-            }
-            self.pending.push((key, pos, m, tbox));
+            self.pending.push((masked_min(m, &tbox), pos, m, tbox));
         }
     }
 
@@ -249,30 +312,13 @@ impl FirstWalk<'_> {
     #[inline(never)]
     fn solve_pending(&mut self) {
         let mut pending = std::mem::take(self.pending);
-        // Nearest first: the entries' keys sorted with their places
-        // ([`cand_key`]: the entry's `total_cmp` order, then the place), eight
-        // bytes each, instead of the 44-byte entries (that sort was 3.6% of
-        // scenes/forest's cycles, perf, one thread, 1920x1080 flat). Ties
-        // stay in the order met, as `sort_unstable_by` kept them up to its
-        // small-sort length: a settled lane's answer does not depend on the
+        // Nearest first, by their keys (see `PendingList`). Ties stay in
+        // the order met: a settled lane's answer does not depend on the
         // order anyway (see the module's notes).
-        let mut order = [0u64; SORT_MAX];
-        let n = pending.len();
-        if n <= SORT_MAX {
-            for (i, p) in pending.iter().enumerate() {
-                order[i] = cand_key(i as u32, p.0);
-            }
-            order[..n].sort_unstable();
-        } else {
-            pending.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
-        }
-        for i in 0..n {
-            let at = if n <= SORT_MAX { order[i] as u32 as usize } else { i };
-            let (_, pos, m, tbox) = pending[at];
-            let mut m = m & self.live;
-            for k in 0..8 {
-                m &= if tbox[k] <= self.reach[k] { u32::MAX } else { !(1 << k) };
-            }
+        pending.sort();
+        for &key in &pending.order {
+            let (_, pos, m, tbox) = pending.items[key as u32 as usize];
+            let m = m & self.live & le_mask(&tbox, &self.reach);
             if m == 0 || self.abort {
                 continue;
             }
@@ -517,10 +563,6 @@ impl FirstWalk<'_> {
         }
     }
 }
-
-/// The most children met between two settles whose keys are sorted on the
-/// stack (more: the entries themselves are sorted).
-const SORT_MAX: usize = 64;
 
 /// The most operands of a child that [`FirstWalk::take_small`] takes.
 pub(crate) const SMALL_OPS: usize = 4;

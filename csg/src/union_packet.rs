@@ -26,7 +26,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Ray, Span,
 };
 
-use super::union_first::{FirstWalk, LaneFirst, Pending};
+use super::union_first::{FirstWalk, LaneFirst, PendingList};
 use super::{cand_key, cand_of_key, counts, Ask, MemoLeaf, Mode, NodeKind, PacketMemo, Program, RayCtx, UnionLane};
 use crate::spans::SpanList;
 
@@ -47,7 +47,7 @@ pub(crate) struct UnionRecords {
     /// The tile list's children a packet can meet (`TileList::for_rays`).
     met: Vec<u32>,
     /// The first-entry walk's children waiting for their solves.
-    pending: Vec<Pending>,
+    pending: PendingList,
 }
 
 impl UnionRecords {

@@ -24,7 +24,11 @@
 //! the evaluation takes without a box test).
 
 use rothray_csg::{FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
-use rothray_primitives::{box_wide::BoxTest8, LeafTable, Surf};
+use rothray_primitives::{
+    box_wide::BoxTest8,
+    mask8::{le_mask, masked_min},
+    LeafTable, Surf,
+};
 
 use crate::box_list::BoxList;
 use crate::scene::{Ray, RenderScene};
@@ -133,20 +137,14 @@ impl RenderScene {
             let Some(test) = BoxTest8::new(&o, &std::array::from_fn(|k| p.rays[k].dir)) else { return false };
             list.packet_tests(&test, (&tmin, &tmax), |oi, hit, t0| {
                 if hit != 0 {
-                    let mut key = f32::INFINITY;
-                    for k in 0..8 {
-                        key = if hit & (1 << k) != 0 { key.min(t0[k]) } else { key };
-                    }
-                    met.push((key, oi, hit, *t0));
+                    met.push((masked_min(hit, t0), oi, hit, *t0));
                 }
             });
             met.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
         }
         for &(_, oi, hit, entry) in met.iter() {
-            let mut lanes = hit;
-            for k in 0..8 {
-                lanes &= if entry[k] <= best.t[k] + 16.0 * eps[k] { u32::MAX } else { !(1 << k) };
-            }
+            let near: [f32; 8] = std::array::from_fn(|k| best.t[k] + 16.0 * eps[k]);
+            let lanes = hit & le_mask(&entry, &near);
             let Some(root) = tile.root(oi) else { continue };
             if lanes == 0 {
                 continue;

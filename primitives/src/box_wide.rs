@@ -106,12 +106,11 @@ impl BoxTest8 {
 // answer divided 24 components, 1.5% of benches/scenes/forest lit, perf.)
 pub fn forms_packet(d: &[Vec3; 8]) -> bool {
     (0..3).all(|a| {
-        let (mut neg, mut pos) = (0u32, 0u32);
-        for v in d {
-            neg += (v[a] < 0.0) as u32;
-            pos += (v[a] > 0.0) as u32;
-        }
-        neg == 8 || pos == 8
+        let h0 = glam::Vec4::new(d[0][a], d[1][a], d[2][a], d[3][a]);
+        let h1 = glam::Vec4::new(d[4][a], d[5][a], d[6][a], d[7][a]);
+        let neg = h0.cmplt(glam::Vec4::ZERO).bitmask() | h1.cmplt(glam::Vec4::ZERO).bitmask() << 4;
+        let pos = h0.cmpgt(glam::Vec4::ZERO).bitmask() | h1.cmpgt(glam::Vec4::ZERO).bitmask() << 4;
+        neg == 0xff || pos == 0xff
     })
 }
 

@@ -27,6 +27,7 @@ pub mod frustum;
 pub mod gcyl;
 pub mod kernels;
 pub mod kernels8;
+pub mod mask8;
 pub mod mesh;
 pub mod poly;
 pub mod polytope;
