@@ -61,6 +61,18 @@ const LEAF: [[u64; 4]; TREE_LEAVES] = [
     [0, 0, u64::MAX, u64::MAX],
 ];
 
+/// Up to this many leaves, a tree's truth table repeats from word to word.
+const PERIODIC: usize = 6;
+
+/// Bit `m` for every set `m` of `count` leaves (`count <= PERIODIC`).
+fn low_sets(count: usize) -> u64 {
+    if count >= 6 {
+        u64::MAX
+    } else {
+        (1u64 << (1 << count)) - 1
+    }
+}
+
 /// A small tree's leaves (in the order of a depth-first walk) and its
 /// truth table.
 pub(crate) struct TreeShape {
@@ -71,6 +83,9 @@ pub(crate) struct TreeShape {
     flip: u32,
     /// Bit `m`: is a point inside exactly the leaves of `m` inside the tree?
     table: [u64; 4],
+    /// Up to [`PERIODIC`] leaves, the bits of `table` of the sets of them
+    /// (others: 0).
+    low: u64,
 }
 
 impl TreeShape {
@@ -78,14 +93,29 @@ impl TreeShape {
     /// [`TREE_LEAVES`] leaves.
     #[inline]
     pub(crate) fn of(prog: &Program, n: usize) -> Option<TreeShape> {
-        let mut t = TreeShape { count: 0, leaf: [0; TREE_LEAVES], flip: 0, table: [0; 4] };
-        t.table = t.pattern(prog, n, false)?;
+        let mut t = TreeShape { count: 0, leaf: [0; TREE_LEAVES], flip: 0, table: [0; 4], low: 0 };
+        // Up to six leaves, every leaf's pattern repeats from word to word
+        // (its bit is in the low six of `m`), and so does the table: one
+        // word is computed (four were most of `pattern`'s work, which was
+        // 1.6% of benches/scenes/forest_deep's instructions flat).
+        if (1..=PERIODIC).contains(&(prog.small[n] as usize)) {
+            let [w] = t.pattern::<1>(prog, n, false)?;
+            t.table = [w; 4];
+            if t.count <= PERIODIC {
+                t.low = w & low_sets(t.count);
+                return Some(t);
+            }
+            // (`small` counts the leaves: not reached.)
+            (t.count, t.flip) = (0, 0);
+        }
+        t.table = t.pattern::<4>(prog, n, false)?;
         Some(t)
     }
 
     /// The truth table of node `c` over the leaves met so far and its own
-    /// (added to the list); `flip`: is `c` subtracted an odd number of times?
-    fn pattern(&mut self, prog: &Program, c: usize, flip: bool) -> Option<[u64; 4]> {
+    /// (added to the list), its first `W` words; `flip`: is `c` subtracted
+    /// an odd number of times?
+    fn pattern<const W: usize>(&mut self, prog: &Program, c: usize, flip: bool) -> Option<[u64; W]> {
         let kind = prog.kind[c];
         if kind == NodeKind::Leaf {
             let j = self.count;
@@ -95,14 +125,14 @@ impl TreeShape {
             self.leaf[j] = prog.first[c];
             self.flip |= (flip as u32) << j;
             self.count += 1;
-            return Some(LEAF[j]);
+            return Some(std::array::from_fn(|w| LEAF[j][w]));
         }
         let first = prog.first[c] as usize;
-        let mut acc = [0u64; 4];
+        let mut acc = [0u64; W];
         for i in 0..prog.count[c] as usize {
             let sub = kind == NodeKind::Difference && i > 0;
-            let p = self.pattern(prog, prog.children[first + i] as usize, flip ^ sub)?;
-            for w in 0..4 {
+            let p = self.pattern::<W>(prog, prog.children[first + i] as usize, flip ^ sub)?;
+            for w in 0..W {
                 acc[w] = match kind {
                     _ if i == 0 => p[w],
                     NodeKind::Union => acc[w] | p[w],
@@ -119,7 +149,8 @@ impl TreeShape {
     /// of trees), for tests.
     #[cfg(test)]
     pub(crate) fn for_tests(count: usize, leaf: [u32; TREE_LEAVES], flip: u32, f: impl FnOnce(&[[u64; 4]]) -> [u64; 4]) -> TreeShape {
-        TreeShape { count, leaf, flip, table: f(&LEAF[..count]) }
+        let table = f(&LEAF[..count]);
+        TreeShape { count, leaf, flip, table, low: if count <= PERIODIC { table[0] & low_sets(count) } else { 0 } }
     }
 
     /// Is a point inside exactly the leaves `m` inside the tree?
@@ -145,6 +176,14 @@ impl TreeShape {
     /// overlap) inside it?
     #[inline(always)]
     pub(crate) fn empty_for(&self, missed: impl Fn(usize) -> bool) -> bool {
+        if self.count <= PERIODIC {
+            // (The sets of up to six leaves are all in the first word.)
+            let mut t = self.low;
+            for j in 0..self.count {
+                t &= if missed(j) { !LEAF[j][0] } else { u64::MAX };
+            }
+            return t == 0;
+        }
         let mut t = self.table;
         for j in 0..self.count {
             if missed(j) {
