@@ -134,7 +134,10 @@ pub(crate) struct FirstWalk<'a> {
     n: usize,
     leaves: &'a LeafTable,
     memo: &'a PacketMemo,
-    soa: Rays8Soa,
+    /// The rays (made SoA only where a leaf is solved here: the packet's
+    /// memo mostly solves them, and transposing them for every walk was
+    /// some 170 instructions a walk of benches/scenes/forest's union).
+    rays: (&'a [glam::Vec3; 8], &'a [glam::Vec3; 8]),
     /// The lanes walked, and those still answered here.
     lanes: u32,
     live: u32,
@@ -167,7 +170,7 @@ impl<'a> FirstWalk<'a> {
     #[inline(always)]
     pub(crate) fn new(
         (prog, n, leaves, memo): (&'a Program, usize, &'a LeafTable, &'a PacketMemo),
-        (o, d): (&[glam::Vec3; 8], &[glam::Vec3; 8]),
+        (o, d): (&'a [glam::Vec3; 8], &'a [glam::Vec3; 8]),
         (tmin, tmax, eps): ([f32; 8], [f32; 8], [f32; 8]),
         lanes: u32,
         pending: &'a mut PendingList,
@@ -179,7 +182,7 @@ impl<'a> FirstWalk<'a> {
             n,
             leaves,
             memo,
-            soa: Rays8Soa::new(o, d),
+            rays: (o, d),
             lanes,
             live: lanes,
             abort: false,
@@ -363,7 +366,7 @@ impl FirstWalk<'_> {
     fn solve_here(&mut self, leaf: u32) -> Ranges8 {
         counts::leaf_solve();
         let mut r = Ranges8::default();
-        self.leaves.ranges8_beside(leaf, &self.soa, self.live, &mut r);
+        self.leaves.ranges8_beside(leaf, &Rays8Soa::new(self.rays.0, self.rays.1), self.live, &mut r);
         r
     }
 
