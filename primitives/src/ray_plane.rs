@@ -280,8 +280,8 @@ mod tests {
 
     /// `lanes_box` gives what `point` lane by lane and `points_box` give,
     /// for random masks, with lanes that are not rays of the plane (another
-    /// origin or direction, a direction behind the eye or zero) inside and
-    /// outside the mask.
+    /// origin or direction, a direction behind the eye, zero or infinite)
+    /// inside and outside the mask.
     #[test]
     fn lanes_box_is_points_box_of_the_points() {
         let seed = 43u64;
@@ -308,6 +308,8 @@ mod tests {
                     1 => d[k] = -d[k],
                     2 => d[k] = Vec3::ZERO,
                     3 => d[k].y += 1e-6,
+                    // (An infinite direction: a point that is not finite.)
+                    4 => d[k].x = f32::INFINITY,
                     _ => {}
                 }
             }
