@@ -364,6 +364,23 @@ pub fn cand_key(pos: u32, t0: f32) -> u64 {
     (((b ^ (((b as i32) >> 31) as u32 | 0x8000_0000)) as u64) << 32) | pos as u64
 }
 
+/// Sorts a few keys ([`cand_key`]s, boundaries) by insertion: a lane's
+/// boundaries and a walk's pending children are a handful most times, for
+/// which `sort_unstable` was a call each (`small_first::sweep`,
+/// `union_first::PendingList`).
+#[inline(always)]
+pub(crate) fn sort_few(keys: &mut [u64]) {
+    for i in 1..keys.len() {
+        let x = keys[i];
+        let mut j = i;
+        while j > 0 && keys[j - 1] > x {
+            keys[j] = keys[j - 1];
+            j -= 1;
+        }
+        keys[j] = x;
+    }
+}
+
 /// The candidate `(pos, t0)` that [`cand_key`] made `k` of.
 #[inline(always)]
 pub(crate) fn cand_of_key(k: u64) -> (u32, f32) {

@@ -7,7 +7,7 @@
 
 use rothray_primitives::{kernels8::Ranges8, Surf};
 
-use super::{cand_key, cand_of_key, NodeKind, Program};
+use super::{cand_key, cand_of_key, sort_few, NodeKind, Program};
 
 /// A kernel leaf's span on lane `k` of its solve, clipped to `(lo, hi)` as
 /// `push_clipped` clips it: its ends, and whether each is the leaf's own
@@ -198,17 +198,8 @@ pub(crate) fn sweep(
     member: impl Fn(u32) -> bool,
     surf: impl Fn((usize, bool)) -> Surf,
 ) -> SmallFirst {
-    // (By hand: at most sixteen, and `sort_unstable` was a call per lane
-    // and child.)
-    for i in 1..ev.len() {
-        let x = ev[i];
-        let mut j = i;
-        while j > 0 && ev[j - 1] > x {
-            ev[j] = ev[j - 1];
-            j -= 1;
-        }
-        ev[j] = x;
-    }
+    // (At most sixteen.)
+    sort_few(ev);
     let mut sure = true;
     let mut prev = lo;
     for &e in ev.iter() {

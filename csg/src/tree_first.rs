@@ -66,7 +66,7 @@ const PERIODIC: usize = 6;
 
 /// Bit `m` for every set `m` of `count` leaves (`count <= PERIODIC`).
 fn low_sets(count: usize) -> u64 {
-    if count >= 6 {
+    if count >= PERIODIC {
         u64::MAX
     } else {
         (1u64 << (1 << count)) - 1

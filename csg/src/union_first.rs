@@ -52,7 +52,7 @@ use rothray_primitives::{
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
 use super::tree_first::{done_by, tree_first, TreeShape, TREE_LEAVES};
-use super::{cand_key, NodeKind, PacketMemo, Program};
+use super::{cand_key, sort_few, NodeKind, PacketMemo, Program};
 use crate::counts;
 
 /// Past the first entry `a`, the other children's boxes entered beyond
@@ -105,20 +105,10 @@ impl PendingList {
     fn sort(&mut self) {
         self.order.clear();
         self.order.extend(self.items.iter().enumerate().map(|(i, p)| cand_key(i as u32, p.0)));
-        let o = &mut self.order[..];
-        if o.len() <= 16 {
-            // (By hand: a handful most times.)
-            for i in 1..o.len() {
-                let x = o[i];
-                let mut j = i;
-                while j > 0 && o[j - 1] > x {
-                    o[j] = o[j - 1];
-                    j -= 1;
-                }
-                o[j] = x;
-            }
+        if self.order.len() <= 16 {
+            sort_few(&mut self.order);
         } else {
-            o.sort_unstable();
+            self.order.sort_unstable();
         }
     }
 }

@@ -12,7 +12,7 @@ use smallvec::SmallVec;
 use crate::aabb::Aabb;
 use crate::bvh::BvhNode;
 use crate::frustum::Frustum;
-use crate::mesh::wide::{collapse, order4, Node4, Packet8, F8, LEAF};
+use crate::mesh::wide::{axis_signs, collapse, order4, Node4, Packet8, F8, LEAF};
 use crate::mesh::SLAB_EPS;
 
 /// The tree; node 0 is the root (no nodes for an empty set).
@@ -106,10 +106,7 @@ impl BoxTest8 {
 // answer divided 24 components, 1.5% of benches/scenes/forest lit, perf.)
 pub fn forms_packet(d: &[Vec3; 8]) -> bool {
     (0..3).all(|a| {
-        let h0 = glam::Vec4::new(d[0][a], d[1][a], d[2][a], d[3][a]);
-        let h1 = glam::Vec4::new(d[4][a], d[5][a], d[6][a], d[7][a]);
-        let neg = h0.cmplt(glam::Vec4::ZERO).bitmask() | h1.cmplt(glam::Vec4::ZERO).bitmask() << 4;
-        let pos = h0.cmpgt(glam::Vec4::ZERO).bitmask() | h1.cmpgt(glam::Vec4::ZERO).bitmask() << 4;
+        let (_, neg, pos) = axis_signs(d, a);
         neg == 0xff || pos == 0xff
     })
 }

@@ -13,6 +13,8 @@
 //! (`f32::min` and `minps` differ only on NaNs and on the sign of a zero
 //! minimum).
 
+use glam::Vec4;
+
 /// The smallest of the lanes `m` (bit `k` for lane `k`) of `t`; `+inf`
 /// when `m` holds none of the eight.
 #[inline(always)]
@@ -51,24 +53,9 @@ pub fn masked_min(m: u32, t: &[f32; 8]) -> f32 {
 /// The lanes `k` where `a[k] <= b[k]` (bit `k`; false where either is NaN).
 #[inline(always)]
 pub fn le_mask(a: &[f32; 8], b: &[f32; 8]) -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::*;
-        // SAFETY: SSE2 is part of x86_64; unaligned loads of 8 floats.
-        unsafe {
-            let lo = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(a.as_ptr()), _mm_loadu_ps(b.as_ptr())));
-            let hi = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(a.as_ptr().add(4)), _mm_loadu_ps(b.as_ptr().add(4))));
-            (lo | hi << 4) as u32
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        let mut m = 0;
-        for k in 0..8 {
-            m |= ((a[k] <= b[k]) as u32) << k;
-        }
-        m
-    }
+    // (glam's compares: SSE2 on x86_64, lane by lane elsewhere.)
+    let half = |h: usize| Vec4::from_slice(&a[4 * h..]).cmple(Vec4::from_slice(&b[4 * h..])).bitmask();
+    half(0) | half(1) << 4
 }
 
 /// Per 4-bit lane set, the lanes as all-ones words.
