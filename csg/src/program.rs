@@ -59,6 +59,12 @@ pub struct Wide {
     /// which children their rays can meet; the `CwBvh` of `bvh` has no such
     /// query); empty in a tile's own wide nodes.
     pub packet: BoxWide,
+    /// The shapes of the children that are small trees, made at bake: a
+    /// packet's walk takes such a child by its shape, which cost some 320
+    /// instructions a take to make there (3% of
+    /// benches/scenes/forest_deep's, callgrind); empty in a tile's own
+    /// wide nodes.
+    pub(crate) trees: tree_first::TreeShapes,
 }
 
 /// All CSG trees of a scene, SoA, children before parents.
@@ -566,7 +572,8 @@ impl<'a> ProgramBuilder<'a> {
                 WideTrees::build(ids.len(), |i| bounds[children[ids[i as usize] as usize] as usize], |i| ids[i as usize]);
             drop(ids);
             wide = p.wides.len() as u32;
-            p.wides.push(Arc::new(Wide { bvh, unbounded, packet }));
+            let trees = tree_first::TreeShapes::of(p, &flat);
+            p.wides.push(Arc::new(Wide { bvh, unbounded, packet, trees }));
         }
         let id = p.kind.len() as u32;
         p.kind.push(kind);

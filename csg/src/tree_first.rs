@@ -75,6 +75,7 @@ fn low_sets(count: usize) -> u64 {
 
 /// A small tree's leaves (in the order of a depth-first walk) and its
 /// truth table.
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct TreeShape {
     /// How many leaves, and which.
     pub(crate) count: usize,
@@ -144,6 +145,16 @@ impl TreeShape {
         Some(acc)
     }
 
+    /// Leaf `j`'s index relative to the first leaf's, in place (see
+    /// [`TreeShapes`]).
+    fn relative(mut self) -> TreeShape {
+        let l0 = self.leaf[0];
+        for l in &mut self.leaf[..self.count] {
+            *l = l.wrapping_sub(l0);
+        }
+        self
+    }
+
     /// A shape of `count` leaves `leaf` with flips `flip` and truth table
     /// `table` made by `f` of the leaves' patterns (any function: a superset
     /// of trees), for tests.
@@ -193,6 +204,60 @@ impl TreeShape {
             }
         }
         t == [0; 4]
+    }
+}
+
+/// The shapes of the children of a wide node that are small trees
+/// ([`Program::is_tree`]), by position, made at bake (kept in the node's
+/// [`Wide`](super::Wide), which tile programs share and live syncs copy).
+/// Their leaves are stored relative to the first one's: a live sync moves
+/// an object's leaves and nodes by one offset each ([`Program`] rows
+/// copied with their ids shifted), which leaves the differences as they
+/// are; the first leaf is found from the child's node when asked.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct TreeShapes {
+    /// Per position, the index of its shape in `shapes` (`u32::MAX`: none);
+    /// empty when no child is a tree.
+    at: Vec<u32>,
+    shapes: Vec<TreeShape>,
+}
+
+impl TreeShapes {
+    /// The shapes of the children `kids` (node ids) of `prog` that are trees.
+    pub(crate) fn of(prog: &Program, kids: &[u32]) -> TreeShapes {
+        let mut s = TreeShapes::default();
+        for (pos, &c) in kids.iter().enumerate() {
+            if prog.kind[c as usize] == NodeKind::Leaf || !prog.is_tree(c as usize) {
+                continue;
+            }
+            let Some(t) = TreeShape::of(prog, c as usize) else { continue };
+            if s.at.is_empty() {
+                s.at = vec![u32::MAX; kids.len()];
+            }
+            s.at[pos] = s.shapes.len() as u32;
+            s.shapes.push(t.relative());
+        }
+        s
+    }
+
+    /// The shape of tree child `c` (node id) at position `pos`: the stored
+    /// one with its leaves made absolute, or made here when none is stored.
+    #[inline(always)]
+    pub(crate) fn get(&self, prog: &Program, pos: u32, c: usize) -> Option<TreeShape> {
+        let Some(&i) = self.at.get(pos as usize).filter(|&&i| i != u32::MAX) else {
+            return TreeShape::of(prog, c);
+        };
+        let mut t = self.shapes[i as usize].clone();
+        // The first leaf of a depth-first walk: the first operand's, down.
+        let mut n = c;
+        while prog.kind[n] != NodeKind::Leaf {
+            n = prog.children[prog.first[n] as usize] as usize;
+        }
+        let l0 = prog.first[n];
+        for l in &mut t.leaf[..t.count] {
+            *l = l.wrapping_add(l0);
+        }
+        Some(t)
     }
 }
 

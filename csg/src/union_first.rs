@@ -332,7 +332,7 @@ impl FirstWalk<'_> {
                 }
                 _ if self.prog.small_leafy(c) => self.take_small(c, m, &tbox),
                 // (Of several levels, or one of more operands than `take_small`'s.)
-                _ if self.prog.is_tree(c) => self.take_tree(c, m, &tbox),
+                _ if self.prog.is_tree(c) => self.take_tree(pos, c, m, &tbox),
                 _ => {
                     self.stop();
                     break;
@@ -456,14 +456,15 @@ impl FirstWalk<'_> {
         }
     }
 
-    /// Takes child `c`, a small tree of several levels, or of one of more
-    /// than [`SMALL_OPS`] operands ([`Program::is_tree`]), for the lanes `m` whose box entries are
-    /// `tbox`, from its leaves' solves ([`tree_first`]). (A forest whose
+    /// Takes child `c` (at position `pos`), a small tree of several levels,
+    /// or of one of more than [`SMALL_OPS`] operands ([`Program::is_tree`]),
+    /// for the lanes `m` whose box entries are `tbox`, from its leaves'
+    /// solves ([`tree_first`]), by its shape made at bake. (A forest whose
     /// trees are two levels deep, a ball cut by a half-space minus a notch,
     /// had every lane leave the walk: 2.8 times forest_cut's time.)
     #[inline(never)]
-    fn take_tree(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
-        let Some(t) = TreeShape::of(self.prog, c) else {
+    fn take_tree(&mut self, pos: u32, c: usize, m: u32, tbox: &[f32; 8]) {
+        let Some(t) = self.prog.wide_of(self.n).trees.get(self.prog, pos, c) else {
             self.stop();
             return;
         };

@@ -55,6 +55,17 @@ fn spawn_leaf(world: &mut World, rng: &mut SmallRng, spread: f32) -> Entity {
     e
 }
 
+/// A random leaf of a kind with a packet kernel (sphere, box, cylinder).
+fn spawn_kernel_leaf(world: &mut World, rng: &mut SmallRng, spread: f32) -> Entity {
+    let t = Transform::from_translation(v3(rng, spread));
+    let r = rng.gen_range(0.2..0.6);
+    match rng.gen_range(0..3) {
+        0 => world.spawn((t, Sphere { center: v3(rng, 0.1), radius: r })),
+        1 => world.spawn((t, Cuboid { min: Vec3::splat(-r), max: Vec3::splat(r) + v3(rng, 0.1).abs() })),
+        _ => world.spawn((t, Cylinder { a: Vec3::new(0.0, -r, 0.0), b: Vec3::new(0.05, r, 0.0), radius: r * 0.6 })),
+    }
+}
+
 fn insert_shape(world: &mut World, rng: &mut SmallRng, e: Entity) {
     let r = rng.gen_range(0.3..1.2);
     match rng.gen_range(0..5) {
@@ -84,11 +95,29 @@ fn random_op(rng: &mut SmallRng) -> Op {
     [Op::Union, Op::Intersection, Op::Difference][rng.gen_range(0..3)]
 }
 
-/// A random object: a leaf, a node over leaves, or nodes nested two deep.
+/// A small tree of two levels (a leaf with an operation on two more), the
+/// child of a forest's wide union: its packet walk takes it by the shape
+/// stored in the union's `Wide`, whose leaves a live sync moves.
+fn spawn_small_tree(world: &mut World, rng: &mut SmallRng) -> Entity {
+    let at = Transform::from_translation(v3(rng, 3.0));
+    let inner: Vec<Entity> = (0..2).map(|_| spawn_kernel_leaf(world, rng, 0.3)).collect();
+    let inner = world.spawn((CsgNode { op: random_op(rng), children: inner },));
+    let first = spawn_kernel_leaf(world, rng, 0.2);
+    let kids = if rng.gen_bool(0.5) { vec![first, inner] } else { vec![inner, first] };
+    world.spawn((CsgNode { op: random_op(rng), children: kids }, at))
+}
+
+/// A random object: a leaf, a node over leaves, nodes nested two deep, or
+/// a wide union of small trees.
 fn spawn_object(world: &mut World, rng: &mut SmallRng, mesh: &Arc<MeshData>) -> Entity {
     let at = v3(rng, 6.0);
-    let root = match rng.gen_range(0..5) {
+    let root = match rng.gen_range(0..6) {
         0 => spawn_leaf(world, rng, 0.0),
+        5 => {
+            // (At least PACKET_UNION_MIN children: packets walk it.)
+            let kids: Vec<Entity> = (0..rng.gen_range(32..40)).map(|_| spawn_small_tree(world, rng)).collect();
+            world.spawn((CsgNode::union(kids),))
+        }
         1 if rng.gen_bool(0.3) => {
             let m = world.spawn((Transform(DAffine3::from_scale(DVec3::splat(1.5))), MeshSolid(mesh.clone())));
             let s = spawn_leaf(world, rng, 0.6);
