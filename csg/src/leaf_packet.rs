@@ -106,7 +106,7 @@ impl PacketMemo {
     // of line, `torus_prep8`): tori -2.2% instructions flat, -2.0% lit
     // (callgrind, 480x270).
     #[inline(always)]
-    pub(crate) fn torus_lane<S: SpanSink + ?Sized>(
+    pub fn torus_lane<S: SpanSink + ?Sized>(
         &self,
         leaves: &LeafTable,
         i: u32,

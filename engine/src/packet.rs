@@ -507,7 +507,7 @@ impl RenderScene {
     /// an analytic leaf (and walks a tile's wide union of leaves) for all
     /// eight rays when the first of them asks for it.
     fn lane_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
-        let plain: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
+        let plain = self.ray_ctx8(rays);
         ready_memo(&mut ps.memo, &plain, tile);
         let mut found = [None; 8];
         // Lanes settled by the objects' packet answers (`packet_first.rs`).
@@ -547,7 +547,7 @@ impl RenderScene {
         let dir_bits = |r: &Ray| r.dir.to_array().map(f32::to_bits);
         let parallel = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| dir_bits(r) == dir_bits(&rays[0]));
         if n == 8 && !self.ray_by_ray && (shares_work(tile) || parallel) && rays.iter().all(plain) {
-            let ctx: [RayCtx; 8] = std::array::from_fn(|k| self.ray_ctx(&rays[k]));
+            let ctx = self.ray_ctx8(rays);
             ready_memo(&mut ps.memo, &ctx, tile);
             if parallel {
                 self.walk_meshes_parallel(rays, &mut ps.memo);
