@@ -260,7 +260,12 @@ impl PacketMemo {
         let mask = slots.len() - 1;
         let at = |i: u32| &slots[i as usize & mask];
         if ids[..n].iter().all(|&i| at(i).0 == i && at(i).1 == generation) {
-            let r: [&Ranges8; TREE_LEAVES] = std::array::from_fn(|j| &at(ids[j.min(n - 1)]).2);
+            // (A plain loop: through `std::array::from_fn` the compiler made
+            // it eight calls in `first_surfaces8`.)
+            let mut r: [&Ranges8; TREE_LEAVES] = [&at(ids[0]).2; TREE_LEAVES];
+            for (r, &i) in r.iter_mut().zip(&ids[..n]) {
+                *r = &at(i).2;
+            }
             return Some(f(&r[..n]));
         }
         // Two leaves in one slot (rare): each solve copied.
@@ -268,7 +273,10 @@ impl PacketMemo {
         for (c, &i) in copies.iter_mut().zip(&ids[..n]) {
             *c = *record(slots, i, generation, |e| solve8::<BESIDE>(leaves, i, rays, lanes, e, odds));
         }
-        let r: [&Ranges8; TREE_LEAVES] = std::array::from_fn(|j| &copies[j]);
+        let mut r: [&Ranges8; TREE_LEAVES] = [&copies[0]; TREE_LEAVES];
+        for (r, c) in r.iter_mut().zip(&copies) {
+            *r = c;
+        }
         Some(f(&r[..n]))
     }
 }

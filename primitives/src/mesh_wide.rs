@@ -707,7 +707,10 @@ impl Packet8 {
     #[inline(always)]
     pub(crate) fn hit(&self, n: &Node4, tlo: &F8, thi: &F8) -> [(u32, f32); 4] {
         let eps = Vec4::splat(SLAB_EPS);
-        std::array::from_fn(|s| {
+        // (A plain loop: through `std::array::from_fn` the compiler made the
+        // four children four calls.)
+        let mut out = [(0u32, 0.0f32); 4];
+        for (s, o) in out.iter_mut().enumerate() {
             let mut mask = 0u32;
             let mut tmin = f32::INFINITY;
             for h in 0..2 {
@@ -723,8 +726,9 @@ impl Packet8 {
                 mask |= m.bitmask() << (4 * h);
                 tmin = tmin.min(Vec4::select(m, lo, Vec4::INFINITY).min_element());
             }
-            (mask, tmin)
-        })
+            *o = (mask, tmin);
+        }
+        out
     }
 
     /// Where the lines of lanes `4h..4h+4` enter and leave box `b` before any
