@@ -723,6 +723,55 @@ fn packets_pick_hits_among_tori() {
     assert!(c.object_settled > rays / 2 && c.object_left > rays / 100, "too few lanes settled among the objects, or left, to test");
 }
 
+/// A union, intersection or difference of two to five operands, ring
+/// tori (fat or thin, turned any way) and kernel leaves, a torus first in
+/// most; some operands twins of another (coincident boundaries).
+fn torus_node_object(rng: &mut SmallRng, spread: f64) -> Shape {
+    let c = rp(rng, spread);
+    let torus = |rng: &mut SmallRng| {
+        let major = rng.gen_range(0.1..0.5);
+        Shape::Torus { c: c + rp(rng, 0.2), axis: (DVec3::Y + rp(rng, 2.0)).normalize(), major, minor: major * rng.gen_range(0.1..0.9) }
+    };
+    let leaf = |rng: &mut SmallRng| match rng.gen_range(0..3) {
+        0 => Shape::Sphere { c: c + rp(rng, 0.3), r: rng.gen_range(0.05..0.4) },
+        1 => Shape::Box { min: c - DVec3::splat(rng.gen_range(0.02..0.4)), max: c + DVec3::splat(rng.gen_range(0.02..0.4)) },
+        _ => Shape::Cylinder { a: c - rp(rng, 0.3), b: c + rp(rng, 0.3), r: rng.gen_range(0.03..0.2) },
+    };
+    let mut ops = vec![if rng.gen_bool(0.8) { torus(rng) } else { leaf(rng) }];
+    for _ in 1..rng.gen_range(2..=5) {
+        let op = match rng.gen_range(0..6) {
+            0 | 1 => torus(rng),
+            2 => ops[rng.gen_range(0..ops.len())].clone(),
+            _ => leaf(rng),
+        };
+        ops.push(op);
+    }
+    let s = match rng.gen_range(0..3) {
+        0 => Shape::Union(ops),
+        1 => Shape::Inter(ops),
+        _ => Shape::Diff(ops),
+    };
+    if rng.gen_bool(0.2) {
+        random_xf(rng, s)
+    } else {
+        s
+    }
+}
+
+/// Tiles of objects that are small nodes of ring tori and kernel leaves
+/// answer their packets' lanes by one sweep of each lane's boundaries
+/// (`PacketMemo::torus_node_firsts`: the tori's spans from the packet's
+/// preps), and every ray still gets exactly what it gets alone, nearest
+/// and any hit: crowded objects (rays starting inside), copies, twins
+/// among the operands (coincident boundaries, which the sweep leaves to
+/// the lane's own evaluation).
+#[test]
+fn packets_pick_hits_among_torus_nodes() {
+    let (rays, hits, shadows, c) = pick_hits(0x70d3, torus_node_object);
+    assert!(hits > rays / 5 && shadows > rays / 5, "too few hits to test");
+    assert!(c.object_settled > rays / 2 && c.object_left > rays / 100, "too few lanes settled among the objects, or left, to test");
+}
+
 /// A small tree of several levels: unions, intersections and differences
 /// of kernel leaves and of such nodes, at most `most` leaves in all (the
 /// packets answer up to 8, `tree_first.rs`; more go lane by lane), near

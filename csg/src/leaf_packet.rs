@@ -97,6 +97,12 @@ impl PacketMemo {
         (r.o, r.d) = (*o, *d);
     }
 
+    /// The lanes of the packet whose leaves this memo solves (0: none).
+    #[inline(always)]
+    pub(crate) fn packet_lanes(&self) -> u32 {
+        self.leaf_solves.borrow().lanes
+    }
+
     /// Lane `k`'s spans of ring torus `i` on `range` (with `first_only`, what
     /// a nearest query needs), from the lane's prep made with every lane's
     /// when the first lane asked, appended to `out`; returns where they stop
