@@ -32,6 +32,12 @@ const MAX_DEPTH: u32 = 64;
 /// exactly as they sort what the baked BVH gives them).
 const SHORT_LIST: usize = 16;
 
+/// A wide difference whose subtrahends the tile meets at most this many of
+/// becomes a narrow difference of those: its operands then fit the packets'
+/// small nodes (`object_packet.rs`, at most eight operands), a ring torus
+/// among them too (benches/scenes/tori's torus bitten by eight balls).
+const NARROW_DIFFERENCE: usize = 6;
+
 /// A wide union whose children the tile meets at most this many of becomes a
 /// narrow union of those: the baked threshold for a BVH. (Measured with
 /// callgrind on scenes/forest at 480x270: 1 487e6 instructions with 6,
@@ -281,6 +287,9 @@ impl Spec<'_> {
                     self.tp.kids.truncate(at);
                     return Some(n);
                 }
+                if met <= NARROW_DIFFERENCE {
+                    return self.write_narrow_difference(n, pos, at, (depth, nearest));
+                }
                 Some(self.write_short_difference(n, pos, at))
             }
             _ => {
@@ -399,6 +408,29 @@ impl Spec<'_> {
         p.small.push(0);
         tp.counts.nodes_written += 1;
         id
+    }
+
+    /// A wide difference's positive operand `positive` (specialised) minus
+    /// the subtrahends at the positions `kids[at..]`, specialised, as a
+    /// narrow difference in their baked order (or the positive operand
+    /// alone when the tile has none of them). A difference's result does
+    /// not depend on the order of its subtrahends (see `combine`), as a
+    /// union's does not on its operands'.
+    fn write_narrow_difference(&mut self, like: u32, positive: u32, at: usize, (depth, nearest): (u32, bool)) -> Option<u32> {
+        let b = self.base;
+        let first = b.first[like as usize] as usize;
+        let mut pos: smallvec::SmallVec<[u32; NARROW_DIFFERENCE]> = self.tp.kids[at..].iter().copied().collect();
+        self.tp.kids.truncate(at);
+        pos.sort_unstable();
+        self.tp.kids.push(positive);
+        for p in pos {
+            if let Some(x) = self.node(b.children[first + p as usize], depth + 1, nearest) {
+                self.tp.kids.push(x);
+            }
+        }
+        let out = if self.tp.kids.len() - at == 1 { positive } else { self.write(NodeKind::Difference, like, at) };
+        self.tp.kids.truncate(at);
+        Some(out)
     }
 
     /// Writes a node of `kind` over `kids[at..]` (the operands kept, in order).
