@@ -490,7 +490,8 @@ impl FirstWalk<'_> {
         // the 8-lane sweep (`tree_first8`) cost more (forest_deep 480x270
         // flat, callgrind: +1.3% instructions when 6 lanes or more took it,
         // +4.1% when all did).
-        let mut m = lanes;
+        // (A lane on which the tree is empty would take nothing.)
+        let mut m = t.maybe_met(r, lanes);
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
