@@ -399,6 +399,17 @@ impl FirstWalk<'_> {
         // A lane that a solve left undone goes the walk's way.
         self.live &= !(m & !lanes);
         counts::wide_children(lanes.count_ones());
+        // An intersection is empty on a lane that misses an operand, a
+        // difference on one that misses its positive operand: with no lane
+        // left, nothing to take (`small_first8` would find every lane empty).
+        let met = match ops.kind {
+            NodeKind::Intersection => ops.r[0].hit & ops.r[1].hit,
+            NodeKind::Difference => ops.r[0].hit,
+            _ => u32::MAX,
+        };
+        if lanes & met == 0 {
+            return;
+        }
         let f = small_first8(ops, lanes, &Ranges { lo: &self.tmin, hi: &self.tmax, eps: &self.eps });
         self.live &= !f.kill;
         self.put8(&f, tbox);
