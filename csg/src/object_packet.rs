@@ -168,16 +168,8 @@ impl PacketMemo {
     /// than lane by lane. `Inside` (unsure) for a lane outside the preps.
     #[inline(always)]
     fn torus_node_first(&self, leaves: &LeafTable, ops: &SmallOps<OBJECT_OPS>, tori: u32, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
-        // As `small_first`: an intersection with a kernel operand the line
-        // misses, or a difference whose kernel positive operand it misses, is
-        // empty.
-        let missed = |j: usize| tori & (1 << j) == 0 && ops.r[j].hit & (1 << k) == 0;
-        let empty = match ops.kind {
-            NodeKind::Intersection => (0..ops.count).any(missed),
-            NodeKind::Difference => missed(0),
-            _ => false,
-        };
-        if empty {
+        // (As `small_first`, by the kernel operands' misses.)
+        if ops.missed_on(k, tori) {
             return SmallFirst::Empty;
         }
         match self.torus_node_sweep(leaves, (ops, tori), k, (lo, eps), true) {
@@ -249,28 +241,12 @@ impl PacketMemo {
             ev[m] = cand_key(2 * 31, known);
             n = m + 1;
         }
-        let all = (1u32 << ops.count) - 1;
-        let (want, union) = match ops.kind {
-            NodeKind::Difference => (1, false),
-            NodeKind::Intersection => (all, false),
-            _ => (0, true),
-        };
-        let member = |m: u32| (m & all == want) != union;
-        let subtract = ops.kind == NodeKind::Difference;
+        // (A torus's boundaries are all its one surface.)
+        let node_surf = ops.node_surf();
         let surf = |(j, exit): (usize, bool)| {
-            let s = if tori & (1 << j) != 0 {
-                Surf::new(ops.leaf[j], 0)
-            } else {
-                let r = &ops.r[j];
-                Surf::new(ops.leaf[j], if exit { r.s1[k] } else { r.s0[k] })
-            };
-            if subtract && j > 0 {
-                s.flip()
-            } else {
-                s
-            }
+            node_surf(j, if tori & (1 << j) != 0 { Surf::new(ops.leaf[j], 0) } else { ops.lane_surf(k, (j, exit)) })
         };
-        let f = sweep(&mut ev[..n], inside, (lo, eps), member, surf);
+        let f = sweep(&mut ev[..n], inside, (lo, eps), ops.member(), surf);
         // (No entry before `known` says nothing of the line past it.)
         (known == f32::INFINITY || f != SmallFirst::Empty).then_some(f)
     }

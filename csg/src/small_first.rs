@@ -65,6 +65,51 @@ impl<const N: usize> SmallOps<N> {
     }
 }
 
+impl<const N: usize> SmallOps<N> {
+    /// Is the node empty on lane `k`'s whole line by Roth's rules, an
+    /// intersection with an operand the line misses or a difference whose
+    /// positive operand it misses (the operands of `unknown`, bits, not
+    /// counted: their solves are not in `r`)?
+    #[inline(always)]
+    pub(crate) fn missed_on(&self, k: usize, unknown: u32) -> bool {
+        let missed = |j: usize| unknown & (1 << j) == 0 && self.r[j].hit & (1 << k) == 0;
+        match self.kind {
+            NodeKind::Intersection => (0..self.count).any(missed),
+            NodeKind::Difference => missed(0),
+            _ => false,
+        }
+    }
+
+    /// Is a point inside exactly the operands `m` (bits; others ignored)
+    /// inside the node? `(m & all == want) != union`: one compare per
+    /// boundary, no match on the kind.
+    #[inline(always)]
+    pub(crate) fn member(&self) -> impl Fn(u32) -> bool {
+        let all = (1u32 << self.count) - 1;
+        let (want, union) = match self.kind {
+            NodeKind::Difference => (1, false),
+            NodeKind::Intersection => (all, false),
+            _ => (0, true),
+        };
+        move |m: u32| (m & all == want) != union
+    }
+
+    /// Operand `j`'s surface `s` as the node's: flipped for a subtrahend
+    /// (the kind read once, as `member` reads it).
+    #[inline(always)]
+    pub(crate) fn node_surf(&self) -> impl Fn(usize, Surf) -> Surf {
+        let subtract = self.kind == NodeKind::Difference;
+        move |j: usize, s: Surf| if subtract && j > 0 { s.flip() } else { s }
+    }
+
+    /// Operand `j`'s own surface at its entry or `exit` on lane `k` (from its solve).
+    #[inline(always)]
+    pub(crate) fn lane_surf(&self, k: usize, (j, exit): (usize, bool)) -> Surf {
+        let r = &self.r[j];
+        Surf::new(self.leaf[j], if exit { r.s1[k] } else { r.s0[k] })
+    }
+}
+
 /// What a small node's result on a lane's range is known to be.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum SmallFirst {
@@ -98,39 +143,14 @@ pub(crate) enum SmallFirst {
 #[inline(always)]
 pub(crate) fn small_first<const N: usize, const E: usize>(ops: &SmallOps<N>, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
     debug_assert!(E == 2 * N);
-    // An intersection with an operand the line misses, or a difference
-    // whose positive operand it misses, is empty on the whole line.
-    let missed = |j: usize| ops.r[j].hit & (1 << k) == 0;
-    let empty = match ops.kind {
-        NodeKind::Intersection => (0..ops.count).any(missed),
-        NodeKind::Difference => missed(0),
-        _ => false,
-    };
-    if empty {
+    if ops.missed_on(k, 0) {
         return SmallFirst::Empty;
     }
     let mut ev = [0u64; E];
     let (n, inside) = lane_events((ops.count, |j| &ops.r[j]), k, lo - 2.0 * eps, &mut ev);
-    // Inside the node: `(m & all == want) != union` for the operands `m`
-    // the point is inside (one compare per boundary, no match on the kind).
-    let all = (1u32 << ops.count) - 1;
-    let (want, union) = match ops.kind {
-        NodeKind::Difference => (1, false),
-        NodeKind::Intersection => (all, false),
-        _ => (0, true),
-    };
-    let member = |m: u32| (m & all == want) != union;
-    let subtract = ops.kind == NodeKind::Difference;
-    let surf = |(j, exit): (usize, bool)| {
-        let r = &ops.r[j];
-        let s = Surf::new(ops.leaf[j], if exit { r.s1[k] } else { r.s0[k] });
-        if subtract && j > 0 {
-            s.flip()
-        } else {
-            s
-        }
-    };
-    sweep(&mut ev[..n], inside, (lo, eps), member, surf)
+    let node_surf = ops.node_surf();
+    let surf = |(j, exit): (usize, bool)| node_surf(j, ops.lane_surf(k, (j, exit)));
+    sweep(&mut ev[..n], inside, (lo, eps), ops.member(), surf)
 }
 
 /// A boundary of a lane as one integer: [`cand_key`] of its place and of
