@@ -333,7 +333,7 @@ fn many_leaf_union(rng: &mut SmallRng, n: usize, spread: f64, kernel_only: bool)
                 }
             }
         };
-        kids.push(if rng.gen_bool(0.2) { random_xf(rng, s) } else { s });
+        kids.push(sometimes_sheared(rng, s));
     }
     insert_twins(rng, &mut kids, 5);
     if kernel_only {
@@ -670,11 +670,7 @@ fn simple_object(rng: &mut SmallRng, spread: f64) -> Shape {
             _ => Shape::Diff(ops),
         }
     };
-    if rng.gen_bool(0.2) {
-        random_xf(rng, s)
-    } else {
-        s
-    }
+    sometimes_sheared(rng, s)
 }
 
 /// Tiles whose objects are all kernel leaves or small nodes of them pick
@@ -698,13 +694,24 @@ fn packets_pick_hits_among_simple_objects() {
 /// A lone ring torus, fat or thin, turned any way (sheared in some).
 fn torus_object(rng: &mut SmallRng, spread: f64) -> Shape {
     let c = rp(rng, spread);
-    let major = rng.gen_range(0.1..0.6);
-    let s = Shape::Torus { c, axis: (DVec3::Y + rp(rng, 2.0)).normalize(), major, minor: major * rng.gen_range(0.05..0.9) };
+    let s = ring_torus(rng, c, (0.1..0.6, 0.05..0.9));
+    sometimes_sheared(rng, s)
+}
+
+/// `s` in a random affine map one time in five (`random_xf`: shears too).
+fn sometimes_sheared(rng: &mut SmallRng, s: Shape) -> Shape {
     if rng.gen_bool(0.2) {
         random_xf(rng, s)
     } else {
         s
     }
+}
+
+/// A ring torus at `c`, its axis any way, its major radius from `majors`
+/// and its minor one that times a factor from `ratios` (below 1).
+fn ring_torus(rng: &mut SmallRng, c: DVec3, (majors, ratios): (std::ops::Range<f64>, std::ops::Range<f64>)) -> Shape {
+    let major = rng.gen_range(majors);
+    Shape::Torus { c, axis: (DVec3::Y + rp(rng, 2.0)).normalize(), major, minor: major * rng.gen_range(ratios) }
 }
 
 /// Tiles of lone tori answer their packets' lanes from the packet's
@@ -729,8 +736,8 @@ fn packets_pick_hits_among_tori() {
 fn torus_node_object(rng: &mut SmallRng, spread: f64) -> Shape {
     let c = rp(rng, spread);
     let torus = |rng: &mut SmallRng| {
-        let major = rng.gen_range(0.1..0.5);
-        Shape::Torus { c: c + rp(rng, 0.2), axis: (DVec3::Y + rp(rng, 2.0)).normalize(), major, minor: major * rng.gen_range(0.1..0.9) }
+        let at = c + rp(rng, 0.2);
+        ring_torus(rng, at, (0.1..0.5, 0.1..0.9))
     };
     let leaf = |rng: &mut SmallRng| match rng.gen_range(0..3) {
         0 => Shape::Sphere { c: c + rp(rng, 0.3), r: rng.gen_range(0.05..0.4) },
@@ -751,11 +758,7 @@ fn torus_node_object(rng: &mut SmallRng, spread: f64) -> Shape {
         1 => Shape::Inter(ops),
         _ => Shape::Diff(ops),
     };
-    if rng.gen_bool(0.2) {
-        random_xf(rng, s)
-    } else {
-        s
-    }
+    sometimes_sheared(rng, s)
 }
 
 /// Tiles of objects that are small nodes of ring tori and kernel leaves
@@ -782,11 +785,7 @@ fn small_tree_object(rng: &mut SmallRng, spread: f64) -> Shape {
     let most = if rng.gen_bool(0.15) { 12 } else { 8 };
     let mut left = most;
     let s = tree_node(rng, c, 0, &mut left);
-    if rng.gen_bool(0.2) {
-        random_xf(rng, s)
-    } else {
-        s
-    }
+    sometimes_sheared(rng, s)
 }
 
 /// A node of [`small_tree_object`] around `c` at depth `depth`, using at
