@@ -292,10 +292,20 @@ impl<'a> MemoLanes<'a> {
 fn leaf_spans(leaves: &LeafTable, ctx: &RayCtx, i: u32, (lo, hi): (f32, f32), nearest: Option<f32>, out: &mut SpanList) -> f32 {
     debug_assert!(out.is_empty());
     let v = leaf_query(leaves, ctx, i, (lo, hi), nearest, out);
-    if v < hi && out.as_slice().first().is_some_and(|s| s.t1 - s.t0 <= ctx.eps) {
+    if leaf_asks_again(out.as_slice(), (v, hi), ctx.eps) {
         return full_again(leaves, ctx, i, (lo, hi), out);
     }
     v
+}
+
+/// Does a leaf's answer `spans` on a range ending at `hi`, exact up to
+/// `valid`, need asking again in full ([`full_again`]): a first span no
+/// longer than `eps` with the answer stopping before the range's end?
+/// (Also read by the engine's per-packet answers of lone tori, which must
+/// leave such lanes to their own evaluation.)
+#[inline(always)]
+pub fn leaf_asks_again(spans: &[Span], (valid, hi): (f32, f32), eps: f32) -> bool {
+    valid < hi && spans.first().is_some_and(|s| s.t1 - s.t0 <= eps)
 }
 
 /// A leaf that stopped just past a first span no longer than eps (a mesh

@@ -262,15 +262,9 @@ impl TreeShapes {
                 continue;
             }
             let mut delta = [0i16; PERIODIC];
-            let fits = (0..t.count).all(|j| match i16::try_from(t.leaf[j] as i64 - t.leaf[0] as i64) {
-                Ok(d) => {
-                    delta[j] = d;
-                    true
-                }
-                Err(_) => false,
-            });
-            if !fits {
-                continue;
+            let offset = |j: usize| i16::try_from(t.leaf[j] as i64 - t.leaf[0] as i64).ok();
+            if !(0..t.count).all(|j| offset(j).map(|d| delta[j] = d).is_some()) {
+                continue; // (leaves too far apart for an i16: made when asked)
             }
             if s.shapes.is_empty() {
                 s.shapes = vec![StoredShape::default(); kids.len()];

@@ -198,7 +198,7 @@ impl RenderScene {
             };
             let spans = scratch.out.as_slice();
             // (`leaf_spans` asks again in full here.)
-            if v < tmax && spans.first().is_some_and(|s| s.t1 - s.t0 <= eps) {
+            if rothray_csg::leaf_asks_again(spans, (v, tmax), eps) {
                 out[k] = FirstOf::Unsure;
                 continue;
             }
