@@ -180,9 +180,24 @@ impl TreeShape {
     /// (63% on benches/scenes/forest_deep flat), each then asked alone.
     #[inline(always)]
     pub(crate) fn maybe_met(&self, r: &[&Ranges8], m: u32) -> u32 {
-        if self.count > PERIODIC || self.low.count_ones() > 8 {
+        if !self.filters() {
             return m;
         }
+        m & self.lanes_meeting(|j| r[j].hit)
+    }
+
+    /// Does [`TreeShape::maybe_met`] filter lanes (up to six leaves and
+    /// eight sets inside the tree)?
+    #[inline(always)]
+    pub(crate) fn filters(&self) -> bool {
+        self.count <= PERIODIC && self.low.count_ones() <= 8
+    }
+
+    /// The lanes that meet every leaf of some set inside the tree, where
+    /// `hit(j)` are the lanes that meet leaf `j` (a tree that
+    /// [`TreeShape::filters`]).
+    #[inline(always)]
+    pub(crate) fn lanes_meeting(&self, hit: impl Fn(usize) -> u32) -> u32 {
         let mut lanes = 0;
         let mut sets = self.low;
         while sets != 0 {
@@ -190,12 +205,12 @@ impl TreeShape {
             sets &= sets - 1;
             let mut l = u32::MAX;
             while set != 0 {
-                l &= r[set.trailing_zeros() as usize].hit;
+                l &= hit(set.trailing_zeros() as usize);
                 set &= set - 1;
             }
             lanes |= l;
         }
-        m & lanes
+        lanes
     }
 
     /// Is the tree empty on a whole line that misses the leaves `j` for

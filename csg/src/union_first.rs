@@ -46,7 +46,7 @@ use rothray_primitives::{
     box_wide::{Lanes8, Visit8},
     kernels8::{Ranges8, Rays8Soa},
     mask8::{le_mask, masked_min},
-    Aabb, LeafTable, Span, Surf,
+    Aabb, LeafKind, LeafTable, Span, Surf,
 };
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
@@ -383,6 +383,9 @@ impl FirstWalk<'_> {
         let first = prog.first[c] as usize;
         let leaf = [0, 1].map(|j| prog.first[prog.children[first + j] as usize]);
         let kind = prog.kind[c];
+        if !self.two_may_meet(kind, leaf, m) {
+            return;
+        }
         let taken =
             memo.with_solves2::<true, _>(leaves, (leaf[0], leaf[1]), |r0, r1| self.take_two(&Two { kind, leaf, r: [r0, r1] }, m, tbox));
         if taken.is_none() {
@@ -390,6 +393,26 @@ impl FirstWalk<'_> {
             ops.gather(prog, c, |leaf| Some(self.solve_here(leaf)));
             self.take_two(&Two::of(&ops), m, tbox);
         }
+    }
+
+    /// May the intersection or difference `kind` of leaves `leaf` be
+    /// non-empty on some lane of `m`? One operand solved first (a
+    /// difference's positive one; an intersection's first but a box or
+    /// half-space): where no lane of `m` meets it (and the solve did them
+    /// all), the other is not solved ([`FirstWalk::tree_may_meet`]'s
+    /// argument).
+    #[inline(always)]
+    fn two_may_meet(&self, kind: NodeKind, leaf: [u32; 2], m: u32) -> bool {
+        let leaves = self.leaves;
+        let late = |i: u32| matches!(leaves.kind[i as usize], LeafKind::Cuboid | LeafKind::HalfSpace);
+        let gate = match kind {
+            NodeKind::Difference => leaf[0],
+            NodeKind::Intersection if late(leaf[0]) && !late(leaf[1]) => leaf[1],
+            NodeKind::Intersection => leaf[0],
+            _ => return true,
+        };
+        let met = self.memo.with_solve::<true, _>(leaves, gate, |r| r.hit | !r.done);
+        met.is_none_or(|h| m & h != 0)
     }
 
     /// [`FirstWalk::take_small2`] of the node `ops`.
@@ -480,6 +503,9 @@ impl FirstWalk<'_> {
             return;
         };
         let (memo, leaves) = (self.memo, self.leaves);
+        if !self.tree_may_meet(&t, m) {
+            return;
+        }
         let taken = memo.with_solves_n::<true, _>(leaves, &t.leaf[..t.count], |r| self.take_tree_solved(&t, r, m, tbox));
         if taken.is_none() {
             let mut solves = [Ranges8::default(); TREE_LEAVES];
@@ -489,6 +515,44 @@ impl FirstWalk<'_> {
             let r: [&Ranges8; TREE_LEAVES] = std::array::from_fn(|j| &solves[j]);
             self.take_tree_solved(&t, &r[..t.count], m, tbox);
         }
+    }
+
+    /// May tree `t` be non-empty on some lane of `m`? Its leaves solved
+    /// one by one from the packet's memo, boxes and half-spaces last, all
+    /// but the last, until no lane can meet every leaf of a set inside
+    /// the tree ([`TreeShape::lanes_meeting`]; a lane a solve left undone
+    /// may). Then the others are not solved: the tree is empty on every
+    /// lane of `m` that the solves did, and a lane walk finds it empty too.
+    /// (A box or half-space meets most of the lanes that meet the child's
+    /// box, which is mostly its own.) Why: on benches/scenes/forest_deep a
+    /// packet that met a tree's box mostly missed its ball or trunk, and
+    /// its three leaves were solved all the same.
+    #[inline(always)]
+    fn tree_may_meet(&self, t: &TreeShape, m: u32) -> bool {
+        if !t.filters() {
+            return true;
+        }
+        let (memo, leaves) = (self.memo, self.leaves);
+        let late = |j: usize| matches!(leaves.kind[t.leaf[j] as usize], LeafKind::Cuboid | LeafKind::HalfSpace);
+        let mut order = [0usize; TREE_LEAVES];
+        let mut n = 0;
+        for pass in [false, true] {
+            for j in 0..t.count {
+                if late(j) == pass {
+                    order[n] = j;
+                    n += 1;
+                }
+            }
+        }
+        let mut hit = [u32::MAX; TREE_LEAVES];
+        for &j in &order[..t.count - 1] {
+            let Some(h) = memo.with_solve::<true, _>(leaves, t.leaf[j], |r| r.hit | !r.done) else { return true };
+            hit[j] = h;
+            if m & t.lanes_meeting(|j| hit[j]) == 0 {
+                return false;
+            }
+        }
+        true
     }
 
     /// [`FirstWalk::take_tree`] of the tree `t` whose leaves' solves are `r`.
