@@ -582,7 +582,7 @@ impl<'a> ProgramBuilder<'a> {
                 WideTrees::build(ids.len(), |i| bounds[children[ids[i as usize] as usize] as usize], |i| ids[i as usize]);
             drop(ids);
             wide = p.wides.len() as u32;
-            let trees = tree_first::TreeShapes::of(p, &flat);
+            let trees = tree_first::TreeShapes::of(p, self.leaves, &flat);
             p.wides.push(Arc::new(Wide { bvh, unbounded, packet, trees }));
         }
         let id = p.kind.len() as u32;

@@ -22,7 +22,7 @@
 //! `small_node` over 60% of its instructions flat, callgrind 480x270), and
 //! such a child made the lanes of a forest leave the packet's walk.
 
-use rothray_primitives::{kernels8::Ranges8, Surf};
+use rothray_primitives::{kernels8::Ranges8, LeafKind, LeafTable, Surf};
 
 use super::small_first::{lane_events, sweep, SmallFirst};
 use super::{NodeKind, Program};
@@ -61,6 +61,9 @@ const LEAF: [[u64; 4]; TREE_LEAVES] = [
     [0, 0, u64::MAX, u64::MAX],
 ];
 
+/// Leaves solved in tree order (`0, 1, 2, ...` in 3 bits each).
+const IN_ORDER: u16 = 0o43210;
+
 /// Up to this many leaves, a tree's truth table repeats from word to word.
 const PERIODIC: usize = 6;
 
@@ -87,6 +90,9 @@ pub(crate) struct TreeShape {
     /// Up to [`PERIODIC`] leaves, the bits of `table` of the sets of them
     /// (others: 0).
     low: u64,
+    /// The order in which a walk solves the first `count - 1` leaves
+    /// before the others ([`TreeShape::solve_order`]), 3 bits a leaf.
+    order: u16,
 }
 
 impl TreeShape {
@@ -94,7 +100,7 @@ impl TreeShape {
     /// [`TREE_LEAVES`] leaves.
     #[inline]
     pub(crate) fn of(prog: &Program, n: usize) -> Option<TreeShape> {
-        let mut t = TreeShape { count: 0, leaf: [0; TREE_LEAVES], flip: 0, table: [0; 4], low: 0 };
+        let mut t = TreeShape { count: 0, leaf: [0; TREE_LEAVES], flip: 0, table: [0; 4], low: 0, order: IN_ORDER };
         // Up to six leaves, every leaf's pattern repeats from word to word
         // (its bit is in the low six of `m`), and so does the table: one
         // word is computed (four were most of `pattern`'s work, which was
@@ -151,7 +157,33 @@ impl TreeShape {
     #[cfg(test)]
     pub(crate) fn for_tests(count: usize, leaf: [u32; TREE_LEAVES], flip: u32, f: impl FnOnce(&[[u64; 4]]) -> [u64; 4]) -> TreeShape {
         let table = f(&LEAF[..count]);
-        TreeShape { count, leaf, flip, table, low: if count <= PERIODIC { table[0] & low_sets(count) } else { 0 } }
+        let low = if count <= PERIODIC { table[0] & low_sets(count) } else { 0 };
+        TreeShape { count, leaf, flip, table, low, order: IN_ORDER }
+    }
+
+    /// The `s`-th leaf a walk solves, for `s < count - 1` (see
+    /// [`TreeShape::with_order`]).
+    #[inline(always)]
+    pub(crate) fn solve_order(&self, s: usize) -> usize {
+        (self.order >> (3 * s)) as usize & 7
+    }
+
+    /// The shape with its leaves solved in the order of `leaves`' kinds:
+    /// boxes and half-spaces last (they meet most lanes that meet the
+    /// child's box, which is mostly their own), the others in tree order.
+    pub(crate) fn with_order(mut self, leaves: &LeafTable) -> TreeShape {
+        let late = |j: usize| matches!(leaves.kind.get(self.leaf[j] as usize), Some(LeafKind::Cuboid | LeafKind::HalfSpace));
+        let mut order = 0u32;
+        let mut s = 0;
+        for pass in [false, true] {
+            for j in (0..self.count).filter(|&j| late(j) == pass) {
+                order |= (j as u32) << (3 * s);
+                s += 1;
+            }
+        }
+        // (The last leaf is solved anyway: 15 bits for six leaves.)
+        self.order = (order & 0x7fff) as u16;
+        self
     }
 
     /// Is a point inside exactly the leaves `m` inside the tree?
@@ -262,17 +294,19 @@ struct StoredShape {
     count: u8,
     flip: u8,
     delta: [i16; PERIODIC],
+    order: u16,
 }
 
 impl TreeShapes {
     /// The shapes of the children `kids` (node ids) of `prog` that are trees.
-    pub(crate) fn of(prog: &Program, kids: &[u32]) -> TreeShapes {
+    pub(crate) fn of(prog: &Program, leaves: &LeafTable, kids: &[u32]) -> TreeShapes {
         let mut s = TreeShapes::default();
         for (pos, &c) in kids.iter().enumerate() {
             if prog.kind[c as usize] == NodeKind::Leaf || !prog.is_tree(c as usize) {
                 continue;
             }
             let Some(t) = TreeShape::of(prog, c as usize) else { continue };
+            let t = t.with_order(leaves);
             if t.count > PERIODIC {
                 continue;
             }
@@ -284,7 +318,7 @@ impl TreeShapes {
             if s.shapes.is_empty() {
                 s.shapes = vec![StoredShape::default(); kids.len()];
             }
-            s.shapes[pos] = StoredShape { word: t.table[0], count: t.count as u8, flip: t.flip as u8, delta };
+            s.shapes[pos] = StoredShape { word: t.table[0], count: t.count as u8, flip: t.flip as u8, delta, order: t.order };
         }
         s
     }
@@ -304,7 +338,7 @@ impl TreeShapes {
         let l0 = prog.first[n];
         let count = st.count as usize;
         let leaf = std::array::from_fn(|j| if j < count { l0.wrapping_add(st.delta[j] as i32 as u32) } else { 0 });
-        Some(TreeShape { count, leaf, flip: st.flip as u32, table: [st.word; 4], low: st.word & low_sets(count) })
+        Some(TreeShape { count, leaf, flip: st.flip as u32, table: [st.word; 4], low: st.word & low_sets(count), order: st.order })
     }
 }
 
@@ -343,7 +377,7 @@ mod tests {
     use crate::spans::Op;
     use rand::{rngs::SmallRng, Rng, SeedableRng};
     use rothray_primitives::glam::{DAffine3, Vec3};
-    use rothray_primitives::{LeafShape, LeafTable, Sphere};
+    use rothray_primitives::{Cuboid, HalfSpace, LeafShape, LeafTable, Sphere};
 
     /// `maybe_met` keeps exactly the lanes `empty_for` does not find empty
     /// (or all of them, past six leaves or eight sets), on random tables
@@ -403,8 +437,14 @@ mod tests {
         let mut rng = SmallRng::seed_from_u64(seed);
         let mut leaves = LeafTable::default();
         for i in 0..1200 {
-            let s = Sphere { center: Vec3::new(i as f32, 0.0, 0.0), radius: 0.4 };
-            leaves.push(&LeafShape::Sphere(s), &DAffine3::IDENTITY).unwrap();
+            // (Boxes and half-spaces among them: solved last.)
+            let c = Vec3::new(i as f32, 0.0, 0.0);
+            let shape = match rng.gen_range(0..4) {
+                0 => LeafShape::Cuboid(Cuboid { min: c - 0.3, max: c + 0.3 }),
+                1 => LeafShape::HalfSpace(HalfSpace { normal: Vec3::Y, offset: 0.1 }),
+                _ => LeafShape::Sphere(Sphere { center: c, radius: 0.4 }),
+            };
+            leaves.push(&shape, &DAffine3::IDENTITY).unwrap();
         }
         let ops = [Op::Union, Op::Intersection, Op::Difference];
         let (mut stored, mut made) = (0, 0);
@@ -437,7 +477,7 @@ mod tests {
                 if prog.kind[c] == NodeKind::Leaf || !prog.is_tree(c) {
                     continue;
                 }
-                let want = TreeShape::of(&prog, c);
+                let want = TreeShape::of(&prog, c).map(|t| if t.count <= PERIODIC { t.with_order(&leaves) } else { t });
                 assert_eq!(wide.trees.get(&prog, pos, c), want, "case {case}: child {pos}");
                 if want.as_ref().is_some_and(|t| t.count <= PERIODIC) {
                     stored += 1;
@@ -447,6 +487,21 @@ mod tests {
             }
         }
         println!("{stored} stored, {made} made when asked");
+        // The order: every leaf but the last once, boxes and half-spaces after the others.
+        let kinds = [LeafKind::Sphere, LeafKind::Sphere, LeafKind::Cuboid, LeafKind::HalfSpace, LeafKind::Sphere, LeafKind::Cuboid];
+        let mut mixed = LeafTable::default();
+        for k in kinds {
+            let c = Vec3::ZERO;
+            let shape = match k {
+                LeafKind::Cuboid => LeafShape::Cuboid(Cuboid { min: c - 0.3, max: c + 0.3 }),
+                LeafKind::HalfSpace => LeafShape::HalfSpace(HalfSpace { normal: Vec3::Y, offset: 0.1 }),
+                _ => LeafShape::Sphere(Sphere { center: c, radius: 0.4 }),
+            };
+            mixed.push(&shape, &DAffine3::IDENTITY).unwrap();
+        }
+        let t = TreeShape::for_tests(6, [5, 4, 3, 2, 1, 0, 0, 0], 0, |p| p[0]).with_order(&mixed);
+        let order: Vec<usize> = (0..5).map(|s| t.solve_order(s)).collect();
+        assert_eq!(order, [1, 4, 5, 0, 2], "leaves 1, 4, 5 are balls, 0 and 3 boxes, 2 a half-space");
         assert!(stored > 100 && made > 20, "both kinds ran: {stored} stored, {made} made");
     }
 

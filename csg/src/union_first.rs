@@ -518,34 +518,24 @@ impl FirstWalk<'_> {
     }
 
     /// May tree `t` be non-empty on some lane of `m`? Its leaves solved
-    /// one by one from the packet's memo, boxes and half-spaces last, all
-    /// but the last, until no lane can meet every leaf of a set inside
-    /// the tree ([`TreeShape::lanes_meeting`]; a lane a solve left undone
-    /// may). Then the others are not solved: the tree is empty on every
-    /// lane of `m` that the solves did, and a lane walk finds it empty too.
-    /// (A box or half-space meets most of the lanes that meet the child's
-    /// box, which is mostly its own.) Why: on benches/scenes/forest_deep a
-    /// packet that met a tree's box mostly missed its ball or trunk, and
-    /// its three leaves were solved all the same.
+    /// one by one from the packet's memo, in the order made at bake
+    /// ([`TreeShape::with_order`]: boxes and half-spaces last), all but the
+    /// last, until no lane can meet every leaf of a set inside the tree
+    /// ([`TreeShape::lanes_meeting`]; a lane a solve left undone may). Then
+    /// the others are not solved: the tree is empty on every lane of `m`
+    /// that the solves did, and a lane walk finds it empty too. Why: on
+    /// benches/scenes/forest_deep a packet that met a tree's box mostly
+    /// missed its ball or trunk, and its three leaves were solved all the
+    /// same.
     #[inline(always)]
     fn tree_may_meet(&self, t: &TreeShape, m: u32) -> bool {
         if !t.filters() {
             return true;
         }
         let (memo, leaves) = (self.memo, self.leaves);
-        let late = |j: usize| matches!(leaves.kind[t.leaf[j] as usize], LeafKind::Cuboid | LeafKind::HalfSpace);
-        let mut order = [0usize; TREE_LEAVES];
-        let mut n = 0;
-        for pass in [false, true] {
-            for j in 0..t.count {
-                if late(j) == pass {
-                    order[n] = j;
-                    n += 1;
-                }
-            }
-        }
         let mut hit = [u32::MAX; TREE_LEAVES];
-        for &j in &order[..t.count - 1] {
+        for s in 0..t.count - 1 {
+            let j = t.solve_order(s);
             let Some(h) = memo.with_solve::<true, _>(leaves, t.leaf[j], |r| r.hit | !r.done) else { return true };
             hit[j] = h;
             if m & t.lanes_meeting(|j| hit[j]) == 0 {
