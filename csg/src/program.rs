@@ -1418,7 +1418,7 @@ mod small_first8;
 pub(crate) mod small_tree;
 use small_tree::SmallLists;
 #[path = "tree_first.rs"]
-mod tree_first;
+pub(crate) mod tree_first;
 #[path = "tree_first8.rs"]
 mod tree_first8;
 #[path = "union_first.rs"]

@@ -303,6 +303,16 @@ impl Spec<'_> {
                     self.tp.kids.truncate(at);
                     return Some(n);
                 }
+                if listing && met >= 2 && b.is_meet_union(n) && !self.narrow_is_tree(n, &self.tp.kids[at..]) {
+                    // Kept whole with a list: packets walk it together, as
+                    // they would not a narrow union of subtrees that is not
+                    // one small tree (each lane evaluated it alone: 4% of
+                    // benches/scenes/forest_deep's instructions flat, in
+                    // tiles that meet a few of its trees).
+                    self.write_list(n, at + unbounded);
+                    self.tp.kids.truncate(at);
+                    return Some(n);
+                }
                 // A narrow union of the children met, in the tree's order
                 // (a union's result does not depend on the order it combines
                 // its operands in: see `combine`).
@@ -323,6 +333,22 @@ impl Spec<'_> {
                 out
             }
         }
+    }
+
+    /// Would a narrow union of the children at positions `pos` of baked
+    /// union `n` be one small tree that packets answer
+    /// ([`Program::is_tree`]: their leaves, at most
+    /// [`TREE_LEAVES`](crate::program::tree_first::TREE_LEAVES), all
+    /// kernel leaves)?
+    fn narrow_is_tree(&self, n: u32, pos: &[u32]) -> bool {
+        let b = self.base;
+        let first = b.first[n as usize] as usize;
+        let small = crate::program::small_tree::small_of(
+            NodeKind::Union,
+            false,
+            pos.iter().map(|&p| b.small[b.children[first + p as usize] as usize]),
+        );
+        small != 0 && small as usize <= crate::program::tree_first::TREE_LEAVES
     }
 
     /// Has the tile's region a ray plane (`prog.ray_plane`, made on first
