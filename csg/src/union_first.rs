@@ -198,6 +198,16 @@ impl<'a> FirstWalk<'a> {
         }
     }
 
+    /// Per lane, the smallest span start among the children solved (infinite
+    /// where none was, or the walk was stopped).
+    pub(crate) fn nearest_starts(&self) -> [f32; 8] {
+        if self.abort {
+            [f32::INFINITY; 8]
+        } else {
+            self.a
+        }
+    }
+
     /// Solves what the traversal left pending (it ends with a `settle`,
     /// which solves them: this is for safety), then gives each lane's
     /// answer where the walk settles it.

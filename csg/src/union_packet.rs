@@ -165,11 +165,13 @@ impl UnionRecords {
         // The lanes whose first entry stands clear of every other child's
         // are answered at once (`union_first.rs`); the others walk.
         let mut first: [Option<LaneFirst>; 8] = [None; 8];
+        let mut starts = [f32::INFINITY; 8];
         if prog.wide_of(nu).unbounded.is_empty() {
             let eps = std::array::from_fn(|k| self.rays[k].1);
             let mut fw = FirstWalk::new((prog, nu, leaves, memo), (&o, &d), (tmin, tmax, eps), lanes, &mut self.pending);
             let mut thi = tmax;
             traverse(prog, nu, (&rays, lanes, &mut thi), &mut self.met, &mut fw);
+            starts = fw.nearest_starts();
             first = fw.finish();
         }
         let mut answered = 0u32;
@@ -186,6 +188,7 @@ impl UnionRecords {
             self.recs.push(MemoLeaf::default());
         }
         let e = &mut self.recs[self.len];
+        let mut unsure = 0u32;
         for k in 0..8 {
             e.spans[k].clear();
             e.valid[k] = valid[k];
@@ -193,10 +196,22 @@ impl UnionRecords {
                 e.spans[k].extend(span);
                 e.valid[k] = v;
             } else if walked & (1 << k) != 0 {
-                e.spans[k].extend_from_slice(self.accs[k].as_slice());
+                let acc = self.accs[k].as_slice();
+                e.spans[k].extend_from_slice(acc);
+                // A child's span that starts before the result's first one
+                // was dropped by a later child (`combine` drops a span no
+                // longer than eps when another operand has spans on the
+                // range): on a range cut before that later child, as an
+                // object's query is cut at a nearer object's answer, it
+                // stays. Such a lane's record answers only its own range:
+                // left to the lane (its query on its range is its own).
+                let first_start = acc.first().map_or(f32::INFINITY, |s| s.t0);
+                if starts[k] < first_start {
+                    unsure |= 1 << k;
+                }
             }
         }
-        (e.leaf, e.done, e.tmin, e.tmax) = (n, answered | walked, tmin, tmax);
+        (e.leaf, e.done, e.tmin, e.tmax) = (n, (answered | walked) & !unsure, tmin, tmax);
         self.len += 1;
         self.len - 1
     }
