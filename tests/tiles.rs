@@ -442,6 +442,16 @@ fn packets_keep_short_spans_a_nearer_object_cuts() {
     walk_wide_unions_of(false, 0x3a99..0x3a9a, false);
 }
 
+/// A seed of [`walk_wide_unions`] past its usual hundred, once wrong: a
+/// tile that met six children of a wide union of leaves wrote a narrow
+/// union of them, whose lanes took them in the operands' order, where the
+/// baked union takes them by box entry; three near-twin balls (two 0.3 eps
+/// apart, the third 1.3 eps past) then fused into another first surface.
+#[test]
+fn packets_take_near_twins_in_the_baked_order() {
+    walk_wide_unions_of(false, 0x3c28..0x3c29, false);
+}
+
 /// [`walk_wide_unions`] over the scenes of `seeds` (`counts`: check that
 /// the walks were reached enough to mean anything).
 fn walk_wide_unions_of(far: bool, seeds: std::ops::Range<u64>, counts: bool) {

@@ -63,6 +63,7 @@ impl Follower {
         p.children.truncate(self.children);
         p.local_len = 0;
         p.lists_len = 0;
+        p.canonical.clear();
     }
 }
 
@@ -127,6 +128,7 @@ fn copy_all(copy: &mut Program, base: &Program) {
         ray_plane: _,
         id,
         edits: _,
+        canonical: _,
     } = base;
     copy.kind.clone_from(kind);
     copy.first.clone_from(first);
@@ -139,5 +141,6 @@ fn copy_all(copy: &mut Program, base: &Program) {
     copy.wides.clone_from(wides);
     copy.local_len = 0;
     copy.lists_len = 0;
+    copy.canonical.clear();
     copy.id = *id;
 }

@@ -108,6 +108,11 @@ pub struct Program {
     pub id: u64,
     /// The rows rewritten in place since the bake (see [`Program::record_edit`]).
     pub edits: EditLog,
+    /// A tile's narrow unions of leaves written for wide unions of leaves,
+    /// and those wide unions (node ids): a lane's own query of one
+    /// evaluates the wide union instead ([`Program::leaf_node`]); empty in
+    /// a baked program.
+    pub canonical: Vec<(u32, u32)>,
 }
 
 /// Per-ray constants of an evaluation: the ray (its range is the range
@@ -919,6 +924,11 @@ impl Program {
     /// early outs as the general path (measured on `scenes/logo`, whose two inner
     /// nodes are like this: frames and their copies were ~40% of the trace time).
     fn leaf_node(&self, n: usize, ask: Ask, (tmin, tmax): (f32, f32), lists: Lists) -> f32 {
+        if !self.canonical.is_empty() {
+            if let Some(&(_, wide)) = self.canonical.iter().find(|c| c.0 == n as u32) {
+                return self.baked_union(wide as usize, ask, (tmin, tmax), lists);
+            }
+        }
         let Ask { leaves, ctx, mode } = ask;
         let Lists { leaf, tmp, acc, .. } = lists;
         let kind = self.kind[n];
@@ -972,6 +982,23 @@ impl Program {
             }
         }
         valid
+    }
+
+    /// A lane's own query of a tile's narrow union of leaves
+    /// ([`Program::canonical`]): the wide union `wide` it was written for,
+    /// evaluated as the baked program evaluates it. Why: the regularised
+    /// union of boundaries that lie within eps of one another in a chain
+    /// depends on the order it meets them in, and the wide union takes its
+    /// children by box entry or in its tree's order, not in the operands'
+    /// order: three near-twin balls (two 0.3 eps apart, the third 1.3 eps
+    /// past) gave one ball through a tile and another through the baked
+    /// union (tests/tiles.rs `packets_take_near_twins_in_the_baked_order`).
+    /// The packets' sweeps of the narrow union still answer the lanes
+    /// where every boundary stands 2 eps clear, which is order-free.
+    #[inline(never)]
+    fn baked_union(&self, wide: usize, ask: Ask, range: (f32, f32), lists: Lists) -> f32 {
+        lists.acc.clear();
+        self.leaf_union(wide, ask, range, lists)
     }
 
     /// A wide union of leaves, its children visited while their boxes start

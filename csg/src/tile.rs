@@ -327,7 +327,14 @@ impl Spec<'_> {
                 let out = match self.tp.kids.len() - at {
                     0 => None,
                     1 => Some(self.tp.kids[at]),
-                    _ => Some(self.write(NodeKind::Union, n, at)),
+                    _ => {
+                        let u = self.write(NodeKind::Union, n, at);
+                        if b.leafy[nu] {
+                            // (Its lanes' own queries evaluate `n`.)
+                            self.tp.prog.canonical.push((u, n));
+                        }
+                        Some(u)
+                    }
                 };
                 self.tp.kids.truncate(at);
                 out
