@@ -452,6 +452,16 @@ fn packets_take_near_twins_in_the_baked_order() {
     walk_wide_unions_of(false, 0x3c28..0x3c29, false);
 }
 
+/// A seed of [`walk_wide_unions`] past its usual hundred, once wrong: as in
+/// [`packets_keep_short_spans_a_nearer_object_cuts`], a box grazed along a
+/// span no longer than eps, in a union with a half-space among its
+/// children (which the first-entry walk does not take: every lane walks
+/// it in order).
+#[test]
+fn packets_keep_short_spans_of_unions_with_half_spaces() {
+    walk_wide_unions_of(false, 0x3e40..0x3e41, false);
+}
+
 /// [`walk_wide_unions`] over the scenes of `seeds` (`counts`: check that
 /// the walks were reached enough to mean anything).
 fn walk_wide_unions_of(far: bool, seeds: std::ops::Range<u64>, counts: bool) {
