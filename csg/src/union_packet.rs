@@ -183,14 +183,16 @@ impl UnionRecords {
         // themselves.
         let walked = if prog.leafy[nu] { lanes & !answered } else { 0 };
         counts::first_entries(answered.count_ones(), walked.count_ones());
-        let (valid, short) =
-            if walked != 0 { self.walk_in_order(memo, (prog, nu, leaves), &rays, walked) } else { ([f32::INFINITY; 8], 0) };
+        let (valid, walk_starts) = if walked != 0 {
+            self.walk_in_order(memo, (prog, nu, leaves), &rays, walked)
+        } else {
+            ([f32::INFINITY; 8], [f32::INFINITY; 8])
+        };
         if self.recs.len() == self.len {
             self.recs.push(MemoLeaf::default());
         }
         let e = &mut self.recs[self.len];
-        // (See below.)
-        let mut unsure = short;
+        let mut unsure = 0u32;
         for k in 0..8 {
             e.spans[k].clear();
             e.valid[k] = valid[k];
@@ -206,13 +208,13 @@ impl UnionRecords {
                 // range): on a range cut before that later child, as an
                 // object's query is cut at a nearer object's answer, it
                 // stays. Such a lane's record answers only its own range:
-                // left to the lane (its query on its range is its own). So
-                // is a lane that met such a span at all in its walk
-                // (`short`: seed 0x3e40 of the walk test, a union with a
-                // half-space among its children, which the first-entry walk
-                // does not take).
+                // left to the lane (its query on its range is its own).
+                // The children's spans are those the first-entry walk
+                // solved and those the in-order walk visited (seed 0x3e40
+                // of the walk test: a union with a half-space among its
+                // children, which the first-entry walk does not take).
                 let first_start = acc.first().map_or(f32::INFINITY, |s| s.t0);
-                if starts[k] < first_start {
+                if starts[k].min(walk_starts[k]) < first_start {
                     unsure |= 1 << k;
                 }
             }
@@ -225,14 +227,14 @@ impl UnionRecords {
     /// Walks wide leaf union `n` of `prog` for the lanes `walked` of the
     /// packet, each visiting the children along its ray in the canonical
     /// order, into `accs`; returns where each lane's result stops being
-    /// exact, and the lanes that met a child span no longer than eps.
+    /// exact, and the smallest start of a child's span each lane visited.
     fn walk_in_order(
         &mut self,
         memo: &PacketMemo,
         (prog, n, leaves): (&Program, usize, &LeafTable),
         rays: &Rays8,
         walked: u32,
-    ) -> ([f32; 8], u32) {
+    ) -> ([f32; 8], [f32; 8]) {
         let w = prog.wide_of(n);
         let ctx: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: self.rays[k].0, eps: self.rays[k].1, memo: Some((memo, k)) });
         let tmin = *rays.tmin;
@@ -252,7 +254,7 @@ impl UnionRecords {
             cands: &mut self.cands,
             accs: &mut self.accs,
             lists: (&mut self.leaf, &mut self.tmp),
-            short: 0,
+            starts: [f32::INFINITY; 8],
         };
         for k in 0..8 {
             walk.accs[k].clear();
@@ -264,7 +266,7 @@ impl UnionRecords {
         }
         let mut thi = tmax;
         traverse(prog, n, (rays, walked, &mut thi), &mut self.met, &mut walk);
-        (walk.st.map(|s| s.valid), walk.short)
+        (walk.st.map(|s| s.valid), walk.starts)
     }
 }
 
@@ -358,9 +360,9 @@ struct LaneWalks<'p, 'c, 's> {
     cands: &'s mut [Vec<u64>],
     accs: &'s mut [SpanList],
     lists: (&'s mut SpanList, &'s mut SpanList),
-    /// The lanes that met a child span no longer than eps (see
+    /// Per lane, the smallest start of a child's span visited (see
     /// [`UnionRecords::walk`]).
-    short: u32,
+    starts: [f32; 8],
 }
 
 impl Visit8 for LaneWalks<'_, '_, '_> {
@@ -442,9 +444,8 @@ impl LaneWalks<'_, '_, '_> {
                 cand.swap_remove(at);
                 let (leaf, tmp) = (&mut *self.lists.0, &mut *self.lists.1);
                 self.prog.union_visit(self.n, pos, ask, tmin, st, (leaf, tmp, &mut self.accs[k]));
-                let eps = self.ctx[k].eps;
-                if leaf.as_slice().iter().any(|s| !(s.t1 - s.t0 > eps)) {
-                    self.short |= 1 << k;
+                if let Some(sp) = leaf.as_slice().first() {
+                    self.starts[k] = self.starts[k].min(sp.t0);
                 }
             };
             self.first[k] = first;
