@@ -172,7 +172,7 @@ impl TreeShape {
     /// boxes and half-spaces last (they meet most lanes that meet the
     /// child's box, which is mostly their own), the others in tree order.
     pub(crate) fn with_order(mut self, leaves: &LeafTable) -> TreeShape {
-        let late = |j: usize| matches!(leaves.kind.get(self.leaf[j] as usize), Some(LeafKind::Cuboid | LeafKind::HalfSpace));
+        let late = |j: usize| solved_late(leaves, self.leaf[j]);
         let mut order = 0u32;
         let mut s = 0;
         for pass in [false, true] {
@@ -340,6 +340,14 @@ impl TreeShapes {
         let leaf = std::array::from_fn(|j| if j < count { l0.wrapping_add(st.delta[j] as i32 as u32) } else { 0 });
         Some(TreeShape { count, leaf, flip: st.flip as u32, table: [st.word; 4], low: st.word & low_sets(count), order: st.order })
     }
+}
+
+/// Is leaf `i` a box or a half-space, which a walk solves after a child's
+/// other leaves? (They meet most lanes that meet the child's box, which is
+/// mostly their own: they seldom tell that no lane meets the child.)
+#[inline(always)]
+pub(crate) fn solved_late(leaves: &LeafTable, i: u32) -> bool {
+    matches!(leaves.kind.get(i as usize), Some(LeafKind::Cuboid | LeafKind::HalfSpace))
 }
 
 /// The lanes that every solve of `r` did.

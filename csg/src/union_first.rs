@@ -46,12 +46,12 @@ use rothray_primitives::{
     box_wide::{Lanes8, Visit8},
     kernels8::{Ranges8, Rays8Soa},
     mask8::{le_mask, masked_min},
-    Aabb, LeafKind, LeafTable, Span, Surf,
+    Aabb, LeafTable, Span, Surf,
 };
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
-use super::tree_first::{done_by, tree_first, TreeShape, TREE_LEAVES};
+use super::tree_first::{done_by, solved_late, tree_first, TreeShape, TREE_LEAVES};
 use super::{cand_key, sort_few, NodeKind, PacketMemo, Program};
 use crate::counts;
 
@@ -422,7 +422,7 @@ impl FirstWalk<'_> {
     #[inline(always)]
     fn two_may_meet(&self, kind: NodeKind, leaf: [u32; 2], m: u32) -> bool {
         let leaves = self.leaves;
-        let late = |i: u32| matches!(leaves.kind[i as usize], LeafKind::Cuboid | LeafKind::HalfSpace);
+        let late = |i: u32| solved_late(leaves, i);
         let gate = match kind {
             NodeKind::Difference => leaf[0],
             NodeKind::Intersection if late(leaf[0]) && !late(leaf[1]) => leaf[1],
