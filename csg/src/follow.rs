@@ -63,7 +63,7 @@ impl Follower {
         p.children.truncate(self.children);
         p.local_len = 0;
         p.lists_len = 0;
-        p.canonical.clear();
+        p.narrowed_unions.clear();
     }
 }
 
@@ -128,7 +128,7 @@ fn copy_all(copy: &mut Program, base: &Program) {
         ray_plane: _,
         id,
         edits: _,
-        canonical: _,
+        narrowed_unions: _,
     } = base;
     copy.kind.clone_from(kind);
     copy.first.clone_from(first);
@@ -141,6 +141,6 @@ fn copy_all(copy: &mut Program, base: &Program) {
     copy.wides.clone_from(wides);
     copy.local_len = 0;
     copy.lists_len = 0;
-    copy.canonical.clear();
+    copy.narrowed_unions.clear();
     copy.id = *id;
 }

@@ -110,9 +110,9 @@ pub struct Program {
     pub edits: EditLog,
     /// A tile's narrow unions of leaves written for wide unions of leaves,
     /// and those wide unions (node ids): a lane's own query of one
-    /// evaluates the wide union instead ([`Program::leaf_node`]); empty in
+    /// evaluates the wide union instead (`Program::leaf_node`); empty in
     /// a baked program.
-    pub canonical: Vec<(u32, u32)>,
+    pub narrowed_unions: Vec<(u32, u32)>,
 }
 
 /// Per-ray constants of an evaluation: the ray (its range is the range
@@ -924,8 +924,8 @@ impl Program {
     /// early outs as the general path (measured on `scenes/logo`, whose two inner
     /// nodes are like this: frames and their copies were ~40% of the trace time).
     fn leaf_node(&self, n: usize, ask: Ask, (tmin, tmax): (f32, f32), lists: Lists) -> f32 {
-        if !self.canonical.is_empty() {
-            if let Some(&(_, wide)) = self.canonical.iter().find(|c| c.0 == n as u32) {
+        if !self.narrowed_unions.is_empty() {
+            if let Some(&(_, wide)) = self.narrowed_unions.iter().find(|c| c.0 == n as u32) {
                 return self.baked_union(wide as usize, ask, (tmin, tmax), lists);
             }
         }
@@ -985,7 +985,7 @@ impl Program {
     }
 
     /// A lane's own query of a tile's narrow union of leaves
-    /// ([`Program::canonical`]): the wide union `wide` it was written for,
+    /// ([`Program::narrowed_unions`]): the wide union `wide` it was written for,
     /// evaluated as the baked program evaluates it. Why: the regularised
     /// union of boundaries that lie within eps of one another in a chain
     /// depends on the order it meets them in, and the wide union takes its

@@ -4,9 +4,12 @@
 //! difference drops it as a subtrahend and is empty without its positive
 //! operand. A wide node asks its region tree once per tile: with no child in
 //! the region a union is empty; with few, it becomes a narrow node of those
-//! (a union's result does not depend on the order of its operands, see
-//! `combine`) or a difference with a short list of them; with many it stays
-//! as baked.
+//! or a difference with a short list of them; with many it stays as baked.
+//! (The regularised union `combine` makes does not depend on the order of
+//! its operands except for chains of boundaries within eps of one another:
+//! a lane's own query of a narrow union of leaves evaluates the baked union,
+//! [`Program::narrowed_unions`]; the README's Known limitations lists the
+//! narrow nodes that still take the tile's order.)
 //!
 //! The specialised nodes are appended to a per-thread copy of the baked
 //! program (which follows a live program's edits row by row, see
@@ -314,8 +317,8 @@ impl Spec<'_> {
                     return Some(n);
                 }
                 // A narrow union of the children met, in the tree's order
-                // (a union's result does not depend on the order it combines
-                // its operands in: see `combine`).
+                // (the order `combine` meets them in matters only for chains
+                // of near twins: see the module's notes).
                 let mut pos: smallvec::SmallVec<[u32; NARROW_UNION]> = self.tp.kids[at..].iter().copied().collect();
                 self.tp.kids.truncate(at);
                 pos.sort_unstable();
@@ -331,7 +334,7 @@ impl Spec<'_> {
                         let u = self.write(NodeKind::Union, n, at);
                         if b.leafy[nu] {
                             // (Its lanes' own queries evaluate `n`.)
-                            self.tp.prog.canonical.push((u, n));
+                            self.tp.prog.narrowed_unions.push((u, n));
                         }
                         Some(u)
                     }
@@ -447,8 +450,9 @@ impl Spec<'_> {
     /// the subtrahends at the positions `kids[at..]`, specialised, as a
     /// narrow difference in their baked order (or the positive operand
     /// alone when the tile has none of them). A difference's result does
-    /// not depend on the order of its subtrahends (see `combine`), as a
-    /// union's does not on its operands'.
+    /// not depend on the order of its subtrahends (see `combine`) except
+    /// for chains of near-twin boundaries, where the baked difference's
+    /// per-ray order may give another (see the module's notes).
     fn write_narrow_difference(&mut self, like: u32, positive: u32, at: usize, (depth, nearest): (u32, bool)) -> Option<u32> {
         let b = self.base;
         let first = b.first[like as usize] as usize;
