@@ -534,6 +534,8 @@ mod tests {
                     x[k],
                     y[k]
                 );
+                assert_eq!(r8[k].inv_dir.to_array().map(f32::to_bits), r1.inv_dir.to_array().map(f32::to_bits), "case {case} ray {k}");
+                assert_eq!((r8[k].tmin, r8[k].tmax), (r1.tmin, r1.tmax), "case {case} ray {k}");
             }
         }
     }
