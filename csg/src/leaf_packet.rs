@@ -84,17 +84,25 @@ impl LeafRecords {
 
 impl PacketMemo {
     /// Lets the evaluations of the packet's lanes `lanes` (world rays
-    /// `o[k] + t d[k]`, which must be the rays of the contexts that carry
-    /// this memo) share their analytic leaves' solves.
-    pub fn solve_leaves_for(&mut self, o: &[Vec3; 8], d: &[Vec3; 8], lanes: u32) {
+    /// `ray(k)`: origin and direction, which must be the rays of the
+    /// contexts that carry this memo) share their analytic leaves' solves.
+    /// (Read lane by lane into the records: an array of the eight origins
+    /// made by the caller and copied here was read back across its 12-byte
+    /// stores, a stall on store forwarding that was a fifth of
+    /// `intersect_packet_with`'s cycles on benches/scenes/capsules flat, perf.)
+    #[inline(always)]
+    pub fn solve_leaves_for(&mut self, ray: impl Fn(usize) -> (Vec3, Vec3), lanes: u32) {
         let r = self.leaf_solves.get_mut();
         if r.slots.is_empty() {
             r.slots.resize(SLOTS, (0, 0, Ranges8::default()));
             r.tori.resize(TORUS_SLOTS, (0, 0, [None; 8]));
         }
         r.generation = r.generation.wrapping_add(1).max(1);
-        (r.lanes, r.rays) = (lanes, Rays8Soa::new(o, d));
-        (r.o, r.d) = (*o, *d);
+        r.lanes = lanes;
+        r.rays = Rays8Soa::from_lanes(&ray);
+        for k in 0..8 {
+            (r.o[k], r.d[k]) = ray(k);
+        }
     }
 
     /// The lanes of the packet whose leaves this memo solves (0: none).

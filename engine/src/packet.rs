@@ -259,7 +259,7 @@ fn ready_memo(memo: &mut PacketMemo, ctx: &[RayCtx; 8], tile: Option<&TileView>)
         memo.walk_unions_for(ctx, 0xff);
     }
     if solves_leaves(tile) {
-        memo.solve_leaves_for(&ctx.map(|c| c.ray.origin), &ctx.map(|c| c.ray.dir), 0xff);
+        memo.solve_leaves_for(|k| (ctx[k].ray.origin, ctx[k].ray.dir), 0xff);
     }
 }
 
@@ -474,7 +474,7 @@ impl RenderScene {
         }
         // Its analytic leaves, solved for all lanes when the first asks.
         if solves_leaves(tile) {
-            ps.memo.solve_leaves_for(&[o; 8], &d, left);
+            ps.memo.solve_leaves_for(|k| (o, d[k]), left);
         }
         // All eight contexts are written before the first is read: reading one
         // just built (its fields written piecewise, read with wider loads) stalls

@@ -123,6 +123,19 @@ impl Rays8Soa {
         }
     }
 
+    /// The rays `ray(k)` (origin, direction) of the eight lanes.
+    #[inline(always)]
+    pub fn from_lanes(ray: impl Fn(usize) -> (Vec3, Vec3)) -> Self {
+        let mut r = Rays8Soa::default();
+        for k in 0..8 {
+            let (o, d) = ray(k);
+            for a in 0..3 {
+                (r.o[a][k], r.d[a][k]) = (o[a], d[a]);
+            }
+        }
+        r
+    }
+
     /// Ray `k`: origin and direction.
     pub fn lane(&self, k: usize) -> (Vec3, Vec3) {
         (Vec3::new(self.o[0][k], self.o[1][k], self.o[2][k]), Vec3::new(self.d[0][k], self.d[1][k], self.d[2][k]))
