@@ -89,6 +89,18 @@ impl BoxTest8 {
         Lanes8 { p: &self.0 }.ray_range(b, tmin, tmax)
     }
 
+    /// [`BoxTest8::ray_range`] with 8-lane AVX ops, for loops compiled with
+    /// AVX: per lane the same operations in the same order, so the same bits.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub unsafe fn ray_range_avx(&self, b: &Aabb, tmin: &[f32; 8], tmax: &[f32; 8]) -> (u32, [f32; 8]) {
+        self.0.box_range_avx(b, tmin, tmax)
+    }
+
     /// Per lane, where the line enters and leaves box `b` before any range
     /// clips it: [`Aabb::clip_slabs`] of these on lane k's `[tmin, tmax]`
     /// is what [`Aabb::ray_range`] gives lane k's ray there, bit for bit

@@ -781,6 +781,34 @@ impl Packet8 {
         (mask, entry)
     }
 
+    /// [`box_range`](Self::box_range) with 8-lane AVX ops: per lane the same
+    /// operations in the same order (`Vec4::max` / `min` are `_mm_max_ps` /
+    /// `_mm_min_ps`, operands in this order), so the same masks and entries.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) fn box_range_avx(&self, b: &crate::Aabb, tlo: &[f32; 8], thi: &[f32; 8]) -> (u32, [f32; 8]) {
+        use std::arch::x86_64::*;
+        // SAFETY: eight lanes each, unaligned loads.
+        let (tlo, thi) = unsafe { (_mm256_loadu_ps(tlo.as_ptr()), _mm256_loadu_ps(thi.as_ptr())) };
+        let (bmin, bmax) = (b.min.to_array(), b.max.to_array());
+        let mut lo = [_mm256_setzero_ps(); 3];
+        let mut hi = [_mm256_setzero_ps(); 3];
+        for a in 0..3 {
+            let (near, far) = if self.near[a] == 0 { (bmin[a], bmax[a]) } else { (bmax[a], bmin[a]) };
+            let (o, inv) = (self.o[a].load(), self.inv[a].load());
+            lo[a] = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(near), o), inv);
+            hi[a] = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(far), o), inv);
+        }
+        let t0 = _mm256_max_ps(_mm256_max_ps(_mm256_max_ps(lo[0], lo[1]), lo[2]), tlo);
+        let t1 = _mm256_min_ps(_mm256_min_ps(_mm256_min_ps(hi[0], hi[1]), hi[2]), thi);
+        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(t0, t1)) as u32;
+        let mut entry = [0.0f32; 8];
+        // SAFETY: eight lanes, an unaligned store.
+        unsafe { _mm256_storeu_ps(entry.as_mut_ptr(), t0) };
+        (mask, entry)
+    }
+
     /// [`hit`](Self::hit) with 8-lane AVX ops: the same operations in the same
     /// order per lane (max/min keep their operand order, so NaN lanes behave
     /// alike), hence the same masks and entry parameters.
