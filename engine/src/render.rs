@@ -85,10 +85,16 @@ impl CameraRays {
     /// the same operations in the same order (so the same bits), with one
     /// vector square root and division per four rays instead of one each.
     pub fn ray8(&self, x: &[f32; 8], y: &[f32; 8]) -> [Ray; 8] {
+        let half = |v: &[f32; 8], h: usize| Vec4::from_slice(&v[4 * h..4 * h + 4]);
+        self.ray8_v([half(x, 0), half(x, 1)], [half(y, 0), half(y, 1)])
+    }
+
+    /// [`ray8`](Self::ray8) of the points given four to a vector.
+    #[inline]
+    pub fn ray8_v(&self, x: [Vec4; 2], y: [Vec4; 2]) -> [Ray; 8] {
         let mut d = [Vec3::ZERO; 8];
         for h in 0..2 {
-            let xs = Vec4::from_slice(&x[4 * h..4 * h + 4]);
-            let ys = Vec4::from_slice(&y[4 * h..4 * h + 4]);
+            let (xs, ys) = (x[h], y[h]);
             let u = Vec4::splat(2.0) * xs / Vec4::splat(self.w) - Vec4::ONE;
             let v = Vec4::ONE - Vec4::splat(2.0) * ys / Vec4::splat(self.h);
             let comp = |a: usize| Vec4::splat(self.fwd[a]) + Vec4::splat(self.right[a]) * u + Vec4::splat(self.up[a]) * v;

@@ -3,7 +3,7 @@
 //! through programs specialised to their own region (the box of their origins
 //! swept towards the light), then the pixels.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 use crate::packet::PacketScratch;
 use crate::render::{hash2, shade, Aov, CameraRays, RenderSettings};
@@ -147,6 +147,10 @@ fn fill_background(f: &Frame, rows: &mut Rows, x0: usize, x1: usize) {
 /// Sample `si` of every pixel of the tile: camera rays in packets, hits (kept
 /// for shading; a flat picture writes its pixels at once: copying the rays and
 /// hits was 4% of a frame of scenes/bunny). Returns whether any ray hit.
+/// Pixel coordinates below this are whole f32 numbers, their sums with 1,
+/// 2, 3 too (see `camera_rays`).
+const PIXELS_EXACT: usize = 1 << 22;
+
 fn camera_rays(f: &Frame, wk: &mut Worker, rows: &mut Rows, si: u32, blocks: &[(usize, usize)]) -> bool {
     let view = wk.ts.view();
     let y0 = rows.y0;
@@ -155,20 +159,32 @@ fn camera_rays(f: &Frame, wk: &mut Worker, rows: &mut Rows, si: u32, blocks: &[(
         // Made by `ray8`, four at a time (filling a template array one by one
         // and reading it back stalled on store forwarding). Lanes past `np`
         // repeat the last pixel.
-        let mut fx = [0.0f32; 8];
-        let mut fy = [0.0f32; 8];
-        for k in 0..8 {
-            let (r, x) = wk.px[start + k.min(np - 1)];
-            let y = y0 + r;
-            let (jx, jy) = if f.spp == 1 {
-                (0.5, 0.5)
-            } else {
-                let rr = hash2((y * f.w + x) as u32, si);
-                ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
-            };
-            (fx[k], fy[k]) = (x as f32 + jx, y as f32 + jy);
-        }
-        let rs = f.rays.ray8(&fx, &fy);
+        let rs = if f.spp == 1 && np == 8 && y0 + wk.px[start].0 < PIXELS_EXACT && wk.px[start].1 < PIXELS_EXACT {
+            // A whole block of 4x2 pixel centres, made in registers: the
+            // scalar stores of the points' arrays, read back four at a time
+            // by `ray8`, stalled on store forwarding (a fifth of its cycles
+            // on benches/scenes/forest_deep flat, perf). The same numbers:
+            // `(x + i) as f32` is `x as f32 + i` below 2^24.
+            let (r, x) = wk.px[start];
+            let xs = Vec4::splat(x as f32) + Vec4::new(0.0, 1.0, 2.0, 3.0) + Vec4::splat(0.5);
+            let y = (y0 + r) as f32;
+            f.rays.ray8_v([xs; 2], [Vec4::splat(y + 0.5), Vec4::splat((y + 1.0) + 0.5)])
+        } else {
+            let mut fx = [0.0f32; 8];
+            let mut fy = [0.0f32; 8];
+            for k in 0..8 {
+                let (r, x) = wk.px[start + k.min(np - 1)];
+                let y = y0 + r;
+                let (jx, jy) = if f.spp == 1 {
+                    (0.5, 0.5)
+                } else {
+                    let rr = hash2((y * f.w + x) as u32, si);
+                    ((rr & 0xffff) as f32 / 65536.0, (rr >> 16) as f32 / 65536.0)
+                };
+                (fx[k], fy[k]) = (x as f32 + jx, y as f32 + jy);
+            }
+            f.rays.ray8(&fx, &fy)
+        };
         let mut hits = [None; 8];
         f.scene.intersect_packet_with(&rs[..np], &mut wk.ps, &mut hits, f.normals, Some(&view));
         let hit = hits[..np].iter().any(Option::is_some);
