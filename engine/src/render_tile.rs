@@ -56,6 +56,8 @@ pub(crate) struct Worker {
     facing: Vec<Vec3>,
     /// The pixels (in packet order) that cast a shadow ray to the light at hand.
     lit: Vec<usize>,
+    /// The objects a group of tiles may meet (see `render.rs`).
+    pub group: Vec<u32>,
 }
 
 impl Worker {
@@ -90,10 +92,19 @@ impl Worker {
 }
 
 /// Renders the tile of columns `[x0, x1)` of `rows` into its pixels.
-pub(crate) fn render_tile(f: &Frame, wk: &mut Worker, rows: &mut Rows, x0: usize, x1: usize, blocks: &mut Vec<(usize, usize)>) {
+/// `among`: the objects a group of tiles holding this one may meet
+/// ([`RenderScene::objects_touched`]), when the job found them.
+pub(crate) fn render_tile(
+    f: &Frame,
+    wk: &mut Worker,
+    rows: &mut Rows,
+    (x0, x1): (usize, usize),
+    among: Option<&[u32]>,
+    blocks: &mut Vec<(usize, usize)>,
+) {
     let (w, scene, s) = (f.w, f.scene, f.s);
     let (y0, nrows) = (rows.y0, rows.rows);
-    if !scene.prepare_tile(&f.rays.tile_region(x0, x1, y0, y0 + nrows), &mut wk.ts) {
+    if !scene.prepare_tile_among(&f.rays.tile_region(x0, x1, y0, y0 + nrows), among, &mut wk.ts) {
         fill_background(f, rows, x0, x1);
         return;
     }
