@@ -155,13 +155,13 @@ fn fill_background(f: &Frame, rows: &mut Rows, x0: usize, x1: usize) {
     }
 }
 
-/// Sample `si` of every pixel of the tile: camera rays in packets, hits (kept
-/// for shading; a flat picture writes its pixels at once: copying the rays and
-/// hits was 4% of a frame of scenes/bunny). Returns whether any ray hit.
 /// Pixel coordinates below this are whole f32 numbers, their sums with 1,
 /// 2, 3 too (see `camera_rays`).
 const PIXELS_EXACT: usize = 1 << 22;
 
+/// Sample `si` of every pixel of the tile: camera rays in packets, hits (kept
+/// for shading; a flat picture writes its pixels at once: copying the rays and
+/// hits was 4% of a frame of scenes/bunny). Returns whether any ray hit.
 fn camera_rays(f: &Frame, wk: &mut Worker, rows: &mut Rows, si: u32, blocks: &[(usize, usize)]) -> bool {
     let view = wk.ts.view();
     let y0 = rows.y0;
