@@ -277,9 +277,9 @@ pub fn meets(a: &Box2, b: &Box2) -> bool {
 
 /// Writes to `met` (as long as the shadows) the indices of the shadows
 /// `[x0, y0, x1, y1]` that meet `pb` ([`meets`]), in order; returns how
-/// many: sixteen shadows a step in AVX-512 where the CPU has it, four in
-/// SSE2 otherwise ([`meets_all_sse2`]). Either way the same compares, so
-/// the same indices.
+/// many: sixteen shadows a step in AVX-512 where the CPU has it, eight in
+/// AVX2 ([`meets_all_avx2`]), four in SSE2 otherwise ([`meets_all_sse2`]).
+/// Either way the same compares, so the same indices.
 pub fn meets_all(pb: &Box2, sides: &[Vec<f32>; 4], met: &mut [u32]) -> usize {
     #[cfg(target_arch = "x86_64")]
     {
@@ -287,8 +287,78 @@ pub fn meets_all(pb: &Box2, sides: &[Vec<f32>; 4], met: &mut [u32]) -> usize {
             // SAFETY: the CPU has AVX-512F.
             return unsafe { meets_all_avx512(pb, sides, met) };
         }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2.
+            return unsafe { meets_all_avx2(pb, sides, met) };
+        }
     }
     meets_all_sse2(pb, sides, met)
+}
+
+/// Per mask of eight lanes, the set lanes' numbers first, in order (the
+/// rest 0): the permutation that packs the lanes a mask selects.
+#[cfg(target_arch = "x86_64")]
+const PACK8: [[u8; 8]; 256] = {
+    let mut t = [[0u8; 8]; 256];
+    let mut m = 0;
+    while m < 256 {
+        let (mut k, mut j) = (0, 0);
+        while k < 8 {
+            if m & (1 << k) != 0 {
+                t[m][j] = k as u8;
+                j += 1;
+            }
+            k += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
+/// [`meets_all`] eight shadows a step in AVX2: one mask of the four
+/// compares, and the indices it selects packed by one permutation from a
+/// table ([`PACK8`]) and stored at once, instead of a loop over the set
+/// bits (AVX2 has no compress). `_CMP_LE_OQ` is `<=` (false with a NaN),
+/// as [`meets`] and the SSE2 `cmpleps` compare.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[doc(hidden)]
+pub unsafe fn meets_all_avx2(pb: &Box2, [x0, y0, x1, y1]: &[Vec<f32>; 4], met: &mut [u32]) -> usize {
+    use std::arch::x86_64::*;
+    let n = x0.len();
+    assert!(met.len() >= n && y0.len() == n && x1.len() == n && y1.len() == n);
+    let (a0, a1, a2, a3) = (_mm256_set1_ps(pb[0]), _mm256_set1_ps(pb[1]), _mm256_set1_ps(pb[2]), _mm256_set1_ps(pb[3]));
+    let mut idx = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let step = _mm256_set1_epi32(8);
+    let mut m = 0;
+    let mut i = 0;
+    while i + 8 <= n {
+        // SAFETY: eight floats from `i`, with `i + 8 <= n` in arrays of length `n`.
+        let (vx0, vy0, vx1, vy1) = unsafe {
+            let p = |v: &Vec<f32>| v.as_ptr().add(i);
+            (_mm256_loadu_ps(p(x0)), _mm256_loadu_ps(p(y0)), _mm256_loadu_ps(p(x1)), _mm256_loadu_ps(p(y1)))
+        };
+        let c = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(a0, vx1), _mm256_cmp_ps::<_CMP_LE_OQ>(vx0, a2)),
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(a1, vy1), _mm256_cmp_ps::<_CMP_LE_OQ>(vy0, a3)),
+        );
+        let bits = _mm256_movemask_ps(c) as usize;
+        // SAFETY: a table row is eight bytes; eight u32 stored from `m`, with
+        // `m <= i` and `i + 8 <= n <= met.len()` (lanes past the set ones
+        // are written over by the next step or lie past the count).
+        unsafe {
+            let perm = _mm256_cvtepu8_epi32(_mm_loadl_epi64(PACK8[bits].as_ptr().cast()));
+            _mm256_storeu_si256(met.as_mut_ptr().add(m).cast(), _mm256_permutevar8x32_epi32(idx, perm));
+        }
+        m += bits.count_ones() as usize;
+        idx = _mm256_add_epi32(idx, step);
+        i += 8;
+    }
+    for j in i..n {
+        met[m] = j as u32;
+        m += meets(pb, &[x0[j], y0[j], x1[j], y1[j]]) as usize;
+    }
+    m
 }
 
 /// [`meets_all`] sixteen shadows a step: one mask of the four compares,
@@ -491,10 +561,10 @@ mod tests {
         assert!(meets(&o.box2d(&far), &[0.0, 0.0, 0.0, 0.0]));
     }
 
-    /// `meets_all` (the AVX-512 build where the CPU has it) and its SSE2
-    /// build list exactly the shadows `meets` accepts, in order, for every
-    /// length (whole steps of 16 and of 4, and the tails), with infinite
-    /// and NaN sides and shared edges.
+    /// `meets_all` (the AVX-512 build where the CPU has it), its AVX2 build
+    /// and its SSE2 build list exactly the shadows `meets` accepts, in
+    /// order, for every length (whole steps of 16, 8 and 4, and the tails),
+    /// with infinite and NaN sides and shared edges.
     #[test]
     fn meets_all_lists_what_meets_accepts() {
         let mut s = 0x2545f491u32;
@@ -518,6 +588,13 @@ mod tests {
             let mut met = vec![0; n];
             let m = meets_all_sse2(&pb, &sides, &mut met);
             assert_eq!(&met[..m], &want[..], "case {case}, SSE2: {pb:?} against {boxes:?}");
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                let mut met = vec![0; n];
+                // SAFETY: the CPU has AVX2.
+                let m = unsafe { meets_all_avx2(&pb, &sides, &mut met) };
+                assert_eq!(&met[..m], &want[..], "case {case}, AVX2: {pb:?} against {boxes:?}");
+            }
         }
     }
 }
