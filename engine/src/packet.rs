@@ -225,24 +225,11 @@ fn shares_work(tile: Option<&TileView>) -> bool {
     tile.is_none_or(|t| t.kernels8 || t.unions)
 }
 
-/// Are all eight `rays` plain: usable ([`Ray::is_valid`]) with a direction
-/// the kernels take as given ([`Ray::dir_rescale`] is `None`)? The same
-/// tests, each lane's combined with `&` and no early exit: eight
-/// short-circuiting `is_valid` and `dir_rescale` calls were a sixth of
-/// `intersect_packet_with`'s cycles on benches/scenes/capsules flat (perf).
+/// Are all eight `rays` plain ([`Ray::is_plain`])? Each lane's answer
+/// combined with `&`, with no early exit.
 #[inline(always)]
 fn all_plain(rays: &[Ray; 8]) -> bool {
-    let lo = 1.0 / rothray_primitives::ray::DIR_SAFE_MAX;
-    let mut ok = true;
-    for r in rays {
-        let (o, d) = (r.origin, r.dir);
-        let finite = o.x.is_finite() & o.y.is_finite() & o.z.is_finite() & d.x.is_finite() & d.y.is_finite() & d.z.is_finite();
-        let range = !r.tmin.is_nan() & !r.tmax.is_nan() & (r.tmin <= r.tmax);
-        // (A largest component of at least 2^-32 is a direction other than zero.)
-        let m = d.x.abs().max(d.y.abs()).max(d.z.abs());
-        ok &= finite & range & (m >= lo) & (m <= rothray_primitives::ray::DIR_SAFE_MAX);
-    }
-    ok
+    rays.iter().fold(true, |ok, r| ok & r.is_plain())
 }
 
 /// Does `tile` (the whole scene without one) keep a leaf with a packet kernel?
@@ -691,58 +678,6 @@ impl RenderScene {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// `all_plain` is the short-circuiting `is_valid` and `dir_rescale`
-    /// tests of every lane: packets of rays with zero, tiny, huge,
-    /// infinite and NaN components and ranges, one odd lane at a time.
-    #[test]
-    fn all_plain_is_each_lane_valid_and_in_range() {
-        let seed = 0x51a7u64;
-        println!("seed {seed}");
-        let mut s = seed;
-        let mut next = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
-        let odd = [
-            0.0f32,
-            -0.0,
-            1e-12,
-            2.3283064e-10,
-            2.3283063e-10,
-            4294967296.0,
-            4294967300.0,
-            1e30,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::NAN,
-            -1.5,
-        ];
-        // A plain number, or (for the odd lane, one time in three) an odd one.
-        let mut pick = move |plain: bool| {
-            let r = next();
-            if plain || r % 3 != 0 {
-                (r % 2001) as f32 / 1000.0 - 1.0
-            } else {
-                odd[((r >> 8) % odd.len() as u64) as usize]
-            }
-        };
-        for case in 0..20000 {
-            let bad = case % 9;
-            let rays: [Ray; 8] = std::array::from_fn(|k| {
-                let plain = k != bad;
-                let o = Vec3::new(pick(plain), pick(plain), pick(plain));
-                let d = Vec3::new(pick(plain) + if plain { 2.0 } else { 0.0 }, pick(plain), pick(plain));
-                let mut r = Ray::new(o, d);
-                (r.tmin, r.tmax) = (pick(plain), pick(plain).abs() + if plain { 2.0 } else { 0.0 });
-                r
-            });
-            let want = rays.iter().all(|r| r.is_valid() && Ray::dir_rescale(r.dir).is_none());
-            assert_eq!(all_plain(&rays), want, "case {case}: {rays:?}");
-        }
-    }
 
     /// `ray_ctx8` gives every lane the context `ray_ctx` gives its ray, bit
     /// for bit: rays from near and far (where the tolerance grows with the

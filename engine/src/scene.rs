@@ -259,24 +259,21 @@ impl RenderScene {
     /// eight were a call each where the compiler chose not to inline it:
     /// +1.2% wall on benches/scenes/tori flat). The lengths and divisions
     /// go lane after lane through arrays, so that the compiler does them
-    /// four or eight at a time (`Vec3::length` is `sqrt((x x + y y) + z
-    /// z)`; a vector square root or division rounds each lane as the
-    /// scalar one does): -1% wall on capsules and tori flat, one thread.
+    /// four or eight at a time (a vector square root or division rounds
+    /// each lane as the scalar one does): -1% wall on capsules and tori
+    /// flat, one thread.
     #[inline(always)]
     pub(crate) fn ray_ctx8(&self, rays: &[Ray]) -> [RayCtx<'static>; 8] {
         let rays: &[Ray; 8] = rays[..8].try_into().expect("eight rays");
         let (mut far, mut dir) = ([0.0f32; 8], [0.0f32; 8]);
         for k in 0..8 {
-            let q = rays[k].origin - self.center;
-            far[k] = ((q.x * q.x + q.y * q.y) + q.z * q.z).sqrt();
-            let d = rays[k].dir;
-            dir[k] = ((d.x * d.x + d.y * d.y) + d.z * d.z).sqrt();
+            far[k] = (rays[k].origin - self.center).length();
+            dir[k] = rays[k].dir.length();
         }
         let mut eps = [0.0f32; 8];
         for k in 0..8 {
             // `eps_at`, then `RayCtx::new`.
-            let ew = self.eps + self.eps_far * if far[k].is_finite() { far[k] } else { 0.0 };
-            eps[k] = ew / dir[k];
+            eps[k] = self.eps_at_distance(far[k]) / dir[k];
         }
         let mut c = [RayCtx { ray: rays[0], eps: 0.0, memo: None }; 8];
         for k in 0..8 {
@@ -288,7 +285,12 @@ impl RenderScene {
     /// The length tolerance of rays from `o` (see [`RenderScene::ray_ctx`]).
     #[inline]
     pub(crate) fn eps_at(&self, o: Vec3) -> f32 {
-        let far = (o - self.center).length();
+        self.eps_at_distance((o - self.center).length())
+    }
+
+    /// [`RenderScene::eps_at`] of a point `far` from the scene's centre.
+    #[inline(always)]
+    fn eps_at_distance(&self, far: f32) -> f32 {
         self.eps + self.eps_far * if far.is_finite() { far } else { 0.0 }
     }
 

@@ -92,6 +92,21 @@ impl Ray {
             && !self.tmax.is_nan()
             && self.tmin <= self.tmax
     }
+
+    /// Is the ray usable ([`Ray::is_valid`]) with a direction the kernels
+    /// take as given ([`Ray::dir_rescale`] is `None`)? The same tests
+    /// combined with `&`, without a branch: a packet asks it of its eight
+    /// rays (short-circuiting, they were a sixth of
+    /// `intersect_packet_with`'s cycles on benches/scenes/capsules flat, perf).
+    #[inline(always)]
+    pub fn is_plain(&self) -> bool {
+        let (o, d) = (self.origin, self.dir);
+        let finite = o.x.is_finite() & o.y.is_finite() & o.z.is_finite() & d.x.is_finite() & d.y.is_finite() & d.z.is_finite();
+        let range = !self.tmin.is_nan() & !self.tmax.is_nan() & (self.tmin <= self.tmax);
+        // (A largest component of at least 2^-32 is a direction other than zero.)
+        let m = d.x.abs().max(d.y.abs()).max(d.z.abs());
+        finite & range & (1.0 / DIR_SAFE_MAX..=DIR_SAFE_MAX).contains(&m)
+    }
 }
 
 #[cold]
@@ -127,5 +142,57 @@ impl<S: SpanSink + ?Sized> SpanSink for ScaledSink<'_, S> {
         if t1 > t0 {
             self.out.push_span(Span { t0, t1, ..s });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `is_plain` is `is_valid` and `dir_rescale` being `None`: rays with
+    /// zero, tiny, huge, infinite and NaN components and ranges.
+    #[test]
+    fn is_plain_is_valid_and_in_range() {
+        let seed = 0x51a7u64;
+        println!("seed {seed}");
+        let mut s = seed;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        let odd = [
+            0.0f32,
+            -0.0,
+            1e-12,
+            2.3283064e-10,
+            2.3283063e-10,
+            4294967296.0,
+            4294967300.0,
+            1e30,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -1.5,
+        ];
+        // A plain number, or one time in three an odd one.
+        let mut pick = move || {
+            let r = next();
+            if r % 3 != 0 {
+                (r % 2001) as f32 / 1000.0 - 1.0
+            } else {
+                odd[((r >> 8) % odd.len() as u64) as usize]
+            }
+        };
+        let mut plain = 0;
+        for case in 0..100_000 {
+            let mut r = Ray::new(Vec3::new(pick(), pick(), pick()), Vec3::new(pick(), pick(), pick()));
+            (r.tmin, r.tmax) = (pick(), pick());
+            let want = r.is_valid() && Ray::dir_rescale(r.dir).is_none();
+            assert_eq!(r.is_plain(), want, "case {case}: {r:?}");
+            plain += want as u32;
+        }
+        assert!(plain > 1000 && plain < 99_000, "too one-sided to mean anything: {plain}");
     }
 }
