@@ -14,6 +14,17 @@ struct Group {
     id: [u32; 4],
 }
 
+impl Group {
+    /// Box `j` of the four.
+    #[inline(always)]
+    fn aabb(&self, j: usize) -> Aabb {
+        Aabb::new(
+            glam::Vec3::new(self.min[0][j], self.min[1][j], self.min[2][j]),
+            glam::Vec3::new(self.max[0][j], self.max[1][j], self.max[2][j]),
+        )
+    }
+}
+
 /// Boxes with ids, tested together against a ray.
 #[derive(Clone, Debug, Default)]
 pub struct BoxList {
@@ -127,10 +138,7 @@ impl BoxList {
         let (tmin, tmax) = range;
         for (gi, g) in self.groups.iter().enumerate() {
             for j in 0..(self.len - 4 * gi).min(4) {
-                let b = Aabb::new(
-                    glam::Vec3::new(g.min[0][j], g.min[1][j], g.min[2][j]),
-                    glam::Vec3::new(g.max[0][j], g.max[1][j], g.max[2][j]),
-                );
+                let b = g.aabb(j);
                 // SAFETY: the CPU has AVX (this function's feature).
                 let (hit, t0) = unsafe { test.ray_range_avx(&b, tmin, tmax) };
                 f(g.id[j], hit, &t0);
@@ -144,10 +152,7 @@ impl BoxList {
     pub fn packet_tests_in(&self, test: &BoxTest8, range: (&[f32; 8], &[f32; 8]), mut f: impl FnMut(u32, u32, &[f32; 8])) {
         for (gi, g) in self.groups.iter().enumerate() {
             for j in 0..(self.len - 4 * gi).min(4) {
-                let b = Aabb::new(
-                    glam::Vec3::new(g.min[0][j], g.min[1][j], g.min[2][j]),
-                    glam::Vec3::new(g.max[0][j], g.max[1][j], g.max[2][j]),
-                );
+                let b = g.aabb(j);
                 let (hit, t0) = test.ray_range(&b, range.0, range.1);
                 f(g.id[j], hit, &t0);
             }
@@ -195,7 +200,7 @@ fn group_entries(g: &Group, ray: &Ray) -> ([f32; 4], u32) {
     let mut out = [0.0f32; 4];
     let mut hit = 0;
     for k in 0..4 {
-        let b = Aabb::new(glam::Vec3::new(g.min[0][k], g.min[1][k], g.min[2][k]), glam::Vec3::new(g.max[0][k], g.max[1][k], g.max[2][k]));
+        let b = g.aabb(k);
         if let Some(t0) = entry(&b, ray) {
             out[k] = t0;
             hit |= 1 << k;
