@@ -159,7 +159,7 @@ pub struct PacketScratch {
     /// ([`packet_candidates`]).
     listed: [Vec<(f32, u32)>; 8],
     /// The objects the packet meets, for `packet_first.rs`.
-    pub(crate) met: Vec<crate::packet_first::Met>,
+    pub(crate) met: crate::packet_first::MetList,
 }
 
 /// The objects of `tile`'s list along each of the eight `rays` (lanes
