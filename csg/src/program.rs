@@ -390,7 +390,7 @@ pub fn cand_key(pos: u32, t0: f32) -> u64 {
 /// which `sort_unstable` was a call each (`small_first::sweep`,
 /// `union_first::PendingList`).
 #[inline(always)]
-pub fn sort_few(keys: &mut [u64]) {
+pub(crate) fn sort_few(keys: &mut [u64]) {
     for i in 1..keys.len() {
         let x = keys[i];
         let mut j = i;
