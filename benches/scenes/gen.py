@@ -598,9 +598,53 @@ SCENES = {f.__name__: f for f in (polytopes, nesting, capsules, gear, tori,
                                   forest_deep)}
 
 
+def forest_objects4():
+    """A forest of 40 000 objects: forest_objects with each tree copied
+    three more times, shifted a little (denser: some 50 objects a tile).
+    Not in the suite: `gen.py --out DIR forest_objects4`."""
+    base = forest_objects()
+    shifts = [(0.37, 0.21), (-0.29, 0.41), (0.13, -0.47)]
+
+    def shifted(shape, dx, dz):
+        t = json.loads(json.dumps(shape))
+        for k, v in t.items():
+            pts = ["center"] if k == "sphere" else ["a", "b"]
+            for p in pts:
+                v[p] = [v[p][0] + dx, v[p][1], v[p][2] + dz]
+        return t
+    trees = base["objects"][1:]
+    for i, (dx, dz) in enumerate(shifts):
+        for o in trees:
+            base["objects"].append(dict(o, name="%s_%d" % (o["name"], i + 1),
+                                        shape=shifted(o["shape"], dx, dz)))
+    base["name"] = "forest_objects4"
+    return base
+
+
+def capsules3000():
+    """3 000 capsules in capsules' volume, each scaled by (1/10)^(1/3)
+    (as many capsules' volume as capsules' 300). Not in the suite:
+    `gen.py --out DIR capsules3000`."""
+    rng = random.Random(301)
+    s = (300 / 3000) ** (1 / 3)
+    objs = []
+    for i in range(3000):
+        h, r = 0.28, 0.12
+        cap = U(cyl([0, -h, 0], [0, h, 0], r), sphere([0, -h, 0], r),
+                sphere([0, h, 0], r))
+        t = X(cap, translate=[rng.uniform(-6, 6), rng.uniform(-3.3, 3.3),
+                              rng.uniform(-3, 1.5)],
+              rotate=[rng.uniform(0, 360), rng.uniform(0, 360),
+                      rng.uniform(0, 360)],
+              scale=[s * rng.uniform(0.6, 1.6), s * rng.uniform(0.6, 1.6),
+                     s * rng.uniform(0.6, 1.6)])
+        objs.append(obj("capsule%d" % i, t, hsv(rng.random(), 0.55, 0.9)))
+    return scene("capsules3000", [0, 0, 10], [0, 0, -1], 40, objs)
+
+
 # Scenes made on request only (`--out DIR NAME`), for measurements outside
 # the suite.
-EXTRA = {f.__name__: f for f in (forest_pitted,)}
+EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000)}
 
 
 def main(argv):
