@@ -561,6 +561,7 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
     serde_json::json!({
         "tiles": t.tiles,
         "tiles_culled": t.tiles_culled,
+        "shadow_bundles_split": t.bundles_split,
         "objects_per_tile": per(t.objects_kept, t.tiles),
         "leaves_pruned_per_tile": per(t.spec.leaves_pruned, t.tiles),
         "leaves_kept_per_tile": per(t.spec.leaves_kept, t.tiles),

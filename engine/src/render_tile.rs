@@ -263,38 +263,9 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
             continue;
         }
         wk.shadows += wk.lit.len() as u64;
-        if !scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts) {
-            for &k in &wk.lit {
-                wk.light[k] += l.color * wk.facing[k].dot(to_l);
-            }
-            continue;
-        }
-        let view = wk.shadow_ts.view();
-        // (Only where a wide union is walked in packets, or many objects
-        // are listed: there a packet's cost grows with the children or
-        // objects any of its lanes meets. Elsewhere the order changed
-        // nothing but its own cost: capsules +1.3% instructions lit.)
-        if view.unions || view.bounded.is_some_and(|b| b.len() >= ORDER_OBJECTS) {
-            order_along_light(&mut wk.lit, &wk.origin, to_l, &mut wk.order);
-        }
-        // In packets of eight (parallel rays from the tile's hits: the tile's
-        // wide unions are walked once per packet). One ray made, the others
-        // its copies from their own origins: the same rays without their
-        // three divisions each (`Ray::new`: some 40 instructions a shadow
-        // ray of benches/scenes/forest lit, callgrind).
-        let proto = Ray::new(Vec3::ZERO, to_l);
-        for chunk in wk.lit.chunks(8) {
-            let mut rays = [proto; 8];
-            for (r, &k) in rays.iter_mut().zip(chunk) {
-                r.origin = wk.origin[k];
-            }
-            let rays = &rays[..chunk.len()];
-            let mut blocked = [false; 8];
-            scene.occluded_packet(rays, &mut wk.ps, &mut blocked, Some(&view));
-            for (&k, _) in chunk.iter().zip(blocked).filter(|(_, b)| !b) {
-                wk.light[k] += l.color * wk.facing[k].dot(to_l);
-            }
-        }
+        let mut lit = std::mem::take(&mut wk.lit);
+        shadow_bundle(scene, wk, &mut lit, (l.color, to_l), region);
+        wk.lit = lit;
     }
     let per_px = wk.hits[..n].iter().zip(wk.base[..n].iter().zip(&wk.light[..n]));
     for ((hit, (base, light)), (acc, dmin)) in per_px.zip(wk.acc[..n].iter_mut().zip(&mut wk.dmin[..n])) {
@@ -306,6 +277,68 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
         *dmin = dmin.min(depth);
     }
 }
+
+/// The shadow rays `lit` (pixels of the tile) towards a light of colour
+/// `color` in direction `to_l` as one bundle, through programs specialised
+/// to `region` (the box of their origins) swept towards the light: each
+/// pixel whose ray is not blocked takes the light. A bundle whose region
+/// meets too many objects to list them goes as two halves, each with its
+/// own region (in the order across the light, so each half's region is
+/// smaller): unlisted, each ray searched the objects' tree alone
+/// (capsules3000 at 480x270, where a third of the shadow rays were in
+/// such bundles: 64% of the shadow rays' instructions, callgrind).
+fn shadow_bundle(scene: &RenderScene, wk: &mut Worker, lit: &mut [usize], (color, to_l): (Vec3, Vec3), region: Aabb) {
+    if !scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts) {
+        for &k in lit.iter() {
+            wk.light[k] += color * wk.facing[k].dot(to_l);
+        }
+        return;
+    }
+    if wk.shadow_ts.view().bounded.is_none() && lit.len() > SPLIT_MIN {
+        wk.shadow_ts.count_split();
+        order_along_light(lit, &wk.origin, to_l, &mut wk.order);
+        // (Whole packets in the first half.)
+        let (a, b) = lit.split_at_mut((lit.len() / 2).div_ceil(8) * 8);
+        for half in [a, b] {
+            let mut region = Aabb::EMPTY;
+            for &k in half.iter() {
+                region.grow(wk.origin[k]);
+            }
+            shadow_bundle(scene, wk, half, (color, to_l), region);
+        }
+        return;
+    }
+    let view = wk.shadow_ts.view();
+    // (Only where a wide union is walked in packets, or many objects
+    // are listed: there a packet's cost grows with the children or
+    // objects any of its lanes meets. Elsewhere the order changed
+    // nothing but its own cost: capsules +1.3% instructions lit.)
+    if view.unions || view.bounded.is_some_and(|b| b.len() >= ORDER_OBJECTS) {
+        order_along_light(lit, &wk.origin, to_l, &mut wk.order);
+    }
+    // In packets of eight (parallel rays from the tile's hits: the tile's
+    // wide unions are walked once per packet). One ray made, the others
+    // its copies from their own origins: the same rays without their
+    // three divisions each (`Ray::new`: some 40 instructions a shadow
+    // ray of benches/scenes/forest lit, callgrind).
+    let proto = Ray::new(Vec3::ZERO, to_l);
+    for chunk in lit.chunks(8) {
+        let mut rays = [proto; 8];
+        for (r, &k) in rays.iter_mut().zip(chunk) {
+            r.origin = wk.origin[k];
+        }
+        let rays = &rays[..chunk.len()];
+        let mut blocked = [false; 8];
+        scene.occluded_packet(rays, &mut wk.ps, &mut blocked, Some(&view));
+        for (&k, _) in chunk.iter().zip(blocked).filter(|(_, b)| !b) {
+            wk.light[k] += color * wk.facing[k].dot(to_l);
+        }
+    }
+}
+
+/// A shadow bundle of more rays than this is split when its region meets
+/// too many objects to list ([`shadow_bundle`]).
+const SPLIT_MIN: usize = 16;
 
 /// From this many objects listed, a shadow bundle's rays are ordered
 /// ([`order_along_light`]): capsules3000 (`benches/scenes/gen.py --out DIR

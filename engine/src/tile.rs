@@ -57,6 +57,9 @@ pub struct TileStats {
     pub tiles_culled: u64,
     /// Objects kept, summed over tiles.
     pub objects_kept: u64,
+    /// Shadow bundles that met too many objects to list them and went as
+    /// two halves (`render_tile::shadow_bundle`).
+    pub bundles_split: u64,
     /// What the specialisation did.
     pub spec: TileCounts,
 }
@@ -67,6 +70,7 @@ impl TileStats {
         self.tiles += o.tiles;
         self.tiles_culled += o.tiles_culled;
         self.objects_kept += o.objects_kept;
+        self.bundles_split += o.bundles_split;
         self.spec.leaves_pruned += o.spec.leaves_pruned;
         self.spec.leaves_kept += o.spec.leaves_kept;
         self.spec.wide_queries += o.spec.wide_queries;
@@ -127,6 +131,11 @@ impl TileScratch {
     /// date cost so far (whole copies, edits replayed).
     pub fn follow_counts(&self) -> rothray_csg::FollowCounts {
         self.tp.follow_counts()
+    }
+
+    /// Counts a shadow bundle split in two (see [`TileStats::bundles_split`]).
+    pub(crate) fn count_split(&mut self) {
+        self.counts.bundles_split += 1;
     }
 
     /// The counts so far, reset.
