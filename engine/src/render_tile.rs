@@ -284,9 +284,10 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
 /// pixel whose ray is not blocked takes the light. A bundle whose region
 /// meets too many objects to list them goes as two halves, each with its
 /// own region (in the order across the light, so each half's region is
-/// smaller): unlisted, each ray searched the objects' tree alone
-/// (capsules3000 at 480x270, where a third of the shadow rays were in
-/// such bundles: 64% of the shadow rays' instructions, callgrind).
+/// smaller), when it meets at most [`SPLIT_OBJECTS`]: unlisted, each ray
+/// searched the objects' tree alone (capsules3000 at 480x270, where a
+/// third of the shadow rays were in such bundles: 64% of the shadow rays'
+/// instructions, callgrind).
 fn shadow_bundle(scene: &RenderScene, wk: &mut Worker, lit: &mut [usize], (color, to_l): (Vec3, Vec3), region: Aabb) {
     if !scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts) {
         for &k in lit.iter() {
@@ -294,7 +295,8 @@ fn shadow_bundle(scene: &RenderScene, wk: &mut Worker, lit: &mut [usize], (color
         }
         return;
     }
-    if wk.shadow_ts.view().bounded.is_none() && lit.len() > SPLIT_MIN {
+    let unlisted = wk.shadow_ts.view().bounded.is_none();
+    if unlisted && lit.len() > SPLIT_MIN && wk.shadow_ts.objects() <= SPLIT_OBJECTS {
         wk.shadow_ts.count_split();
         order_along_light(lit, &wk.origin, to_l, &mut wk.order);
         // (Whole packets in the first half.)
@@ -337,8 +339,14 @@ fn shadow_bundle(scene: &RenderScene, wk: &mut Worker, lit: &mut [usize], (color
 }
 
 /// A shadow bundle of more rays than this is split when its region meets
-/// too many objects to list ([`shadow_bundle`]).
+/// too many objects to list, but at most this many objects (then its
+/// halves are likely to be listed; [`shadow_bundle`]). Where a bundle
+/// meets more, its halves were unlisted too, and each prepared its
+/// objects again for nothing: capsules3000 at 128x72 lit took 46% longer
+/// splitting at any count, 2% less up to 512 (one thread, medians of 7;
+/// 256x144 -12%, 480x270 -16%).
 const SPLIT_MIN: usize = 16;
+const SPLIT_OBJECTS: usize = 2 * crate::tile::OBJECT_LIST;
 
 /// From this many objects listed, a shadow bundle's rays are ordered
 /// ([`order_along_light`]): capsules3000 (`benches/scenes/gen.py --out DIR

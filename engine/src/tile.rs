@@ -133,6 +133,11 @@ impl TileScratch {
         self.tp.follow_counts()
     }
 
+    /// How many objects the current tile keeps.
+    pub(crate) fn objects(&self) -> usize {
+        self.live.len()
+    }
+
     /// Counts a shadow bundle split in two (see [`TileStats::bundles_split`]).
     pub(crate) fn count_split(&mut self) {
         self.counts.bundles_split += 1;
