@@ -32,6 +32,7 @@ mod changes;
 pub mod components;
 mod entity_hash;
 pub mod knobs;
+mod light_order;
 mod live;
 mod live_meshes;
 #[cfg(test)]
