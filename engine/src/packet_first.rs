@@ -137,12 +137,18 @@ impl MetList {
     /// perf).
     fn order(&mut self) {
         self.at = 0;
-        if self.items.len() <= FEW_MET {
+        if !self.keyed() {
             self.items.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
         } else {
             self.keys.clear();
             self.keys.extend(self.items.iter().enumerate().map(|(i, m)| cand_key(i as u32, m.0)));
         }
+    }
+
+    /// Are the objects taken by their keys (more than a few)?
+    #[inline(always)]
+    fn keyed(&self) -> bool {
+        self.items.len() > FEW_MET
     }
 
     /// The nearest object not taken yet (see [`MetList::order`]).
@@ -153,7 +159,7 @@ impl MetList {
             return None;
         }
         self.at += 1;
-        if self.items.len() <= FEW_MET {
+        if !self.keyed() {
             return Some(self.items[i]);
         }
         let (mut j, mut kj) = (i, self.keys[i]);
@@ -205,7 +211,7 @@ impl RenderScene {
             });
         }
         met.order();
-        let many = met.items.len() > FEW_MET;
+        let many = met.keyed();
         while let Some((nearest, oi, hit, entry)) = met.next_nearest() {
             let near: [f32; 8] = std::array::from_fn(|k| best.t[k] + 16.0 * eps[k]);
             // The objects come by their lanes' smallest entry: once it lies

@@ -253,19 +253,17 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
         // The shadow rays of this light: hits whose surface faces it, and
         // the box of their origins.
         wk.lit.clear();
-        let mut region = Aabb::EMPTY;
-        for (k, (hit, (facing, origin))) in wk.hits[..n].iter().zip(wk.facing[..n].iter().zip(&wk.origin[..n])).enumerate() {
+        for (k, (hit, facing)) in wk.hits[..n].iter().zip(&wk.facing[..n]).enumerate() {
             if hit.is_some() && facing.dot(to_l) > 0.0 {
                 wk.lit.push(k);
-                region.grow(*origin);
             }
         }
-        if region.is_empty() {
+        if wk.lit.is_empty() {
             continue;
         }
         wk.shadows += wk.lit.len() as u64;
         let mut lit = std::mem::take(&mut wk.lit);
-        shadow_bundle(scene, wk, &mut lit, (l.color, to_l), region);
+        shadow_bundle(scene, wk, &mut lit, (l.color, to_l));
         wk.lit = lit;
     }
     let per_px = wk.hits[..n].iter().zip(wk.base[..n].iter().zip(&wk.light[..n]));
@@ -279,9 +277,10 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
     }
 }
 
-/// The shadow rays `lit` (pixels of the tile) towards a light of colour
-/// `color` in direction `to_l` as one bundle, through programs specialised
-/// to `region` (the box of their origins) swept towards the light: each
+/// The shadow rays `lit` (pixels of the tile, at least one) towards a
+/// light of colour `color` in direction `to_l` as one bundle, through
+/// programs specialised to the box of their origins swept towards the
+/// light: each
 /// pixel whose ray is not blocked takes the light. A bundle whose region
 /// meets too many objects to list them goes as two halves, each with its
 /// own region (in the order across the light, so each half's region is
@@ -289,7 +288,11 @@ fn shade_lit(f: &Frame, wk: &mut Worker) {
 /// searched the objects' tree alone (capsules3000 at 480x270, where a
 /// third of the shadow rays were in such bundles: 64% of the shadow rays'
 /// instructions, callgrind).
-fn shadow_bundle(scene: &RenderScene, wk: &mut Worker, lit: &mut [usize], (color, to_l): (Vec3, Vec3), region: Aabb) {
+fn shadow_bundle(scene: &RenderScene, wk: &mut Worker, lit: &mut [usize], (color, to_l): (Vec3, Vec3)) {
+    let mut region = Aabb::EMPTY;
+    for &k in lit.iter() {
+        region.grow(wk.origin[k]);
+    }
     if !scene.prepare_tile(&Frustum::sweep(&region, to_l), &mut wk.shadow_ts) {
         for &k in lit.iter() {
             wk.light[k] += color * wk.facing[k].dot(to_l);
@@ -303,11 +306,7 @@ fn shadow_bundle(scene: &RenderScene, wk: &mut Worker, lit: &mut [usize], (color
         // (Whole packets in the first half.)
         let (a, b) = lit.split_at_mut((lit.len() / 2).div_ceil(8) * 8);
         for half in [a, b] {
-            let mut region = Aabb::EMPTY;
-            for &k in half.iter() {
-                region.grow(wk.origin[k]);
-            }
-            shadow_bundle(scene, wk, half, (color, to_l), region);
+            shadow_bundle(scene, wk, half, (color, to_l));
         }
         return;
     }
