@@ -215,9 +215,15 @@ def nesting():
 def capsules():
     """300 separate objects, each a capsule (cylinder and two spheres) under
     a random rotation and non-uniform scale, filling the view."""
-    rng = random.Random(300)
+    return capsule_field("capsules", 300, 300, 1.0)
+
+
+def capsule_field(name, n, seed, s):
+    """`n` capsules (cylinder and two spheres) as objects, each under a
+    random rotation and non-uniform scale (times `s`), in capsules' volume."""
+    rng = random.Random(seed)
     objs = []
-    for i in range(300):
+    for i in range(n):
         h, r = 0.28, 0.12
         cap = U(cyl([0, -h, 0], [0, h, 0], r), sphere([0, -h, 0], r),
                 sphere([0, h, 0], r))
@@ -225,10 +231,10 @@ def capsules():
                               rng.uniform(-3, 1.5)],
               rotate=[rng.uniform(0, 360), rng.uniform(0, 360),
                       rng.uniform(0, 360)],
-              scale=[rng.uniform(0.6, 1.6), rng.uniform(0.6, 1.6),
-                     rng.uniform(0.6, 1.6)])
+              scale=[s * rng.uniform(0.6, 1.6), s * rng.uniform(0.6, 1.6),
+                     s * rng.uniform(0.6, 1.6)])
         objs.append(obj("capsule%d" % i, t, hsv(rng.random(), 0.55, 0.9)))
-    return scene("capsules", [0, 0, 10], [0, 0, -1], 40, objs)
+    return scene(name, [0, 0, 10], [0, 0, -1], 40, objs)
 
 
 def gear_shape(c, R, n, w, phase, rng):
@@ -625,21 +631,7 @@ def capsules3000():
     """3 000 capsules in capsules' volume, each scaled by (1/10)^(1/3)
     (as many capsules' volume as capsules' 300). Not in the suite:
     `gen.py --out DIR capsules3000`."""
-    rng = random.Random(301)
-    s = (300 / 3000) ** (1 / 3)
-    objs = []
-    for i in range(3000):
-        h, r = 0.28, 0.12
-        cap = U(cyl([0, -h, 0], [0, h, 0], r), sphere([0, -h, 0], r),
-                sphere([0, h, 0], r))
-        t = X(cap, translate=[rng.uniform(-6, 6), rng.uniform(-3.3, 3.3),
-                              rng.uniform(-3, 1.5)],
-              rotate=[rng.uniform(0, 360), rng.uniform(0, 360),
-                      rng.uniform(0, 360)],
-              scale=[s * rng.uniform(0.6, 1.6), s * rng.uniform(0.6, 1.6),
-                     s * rng.uniform(0.6, 1.6)])
-        objs.append(obj("capsule%d" % i, t, hsv(rng.random(), 0.55, 0.9)))
-    return scene("capsules3000", [0, 0, 10], [0, 0, -1], 40, objs)
+    return capsule_field("capsules3000", 3000, 301, (300 / 3000) ** (1 / 3))
 
 
 # Scenes made on request only (`--out DIR NAME`), for measurements outside
