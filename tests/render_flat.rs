@@ -5,6 +5,11 @@
 use glam::Vec3;
 use rothray::engine::{encode_srgb, render, Aov, RenderScene, RenderSettings};
 
+/// Shaded pictures of one sample a pixel, `w` x `h`, of the whole image.
+fn shaded((w, h): (u32, u32), background: Vec3, lights: Vec<rothray::engine::Light>, ambient: f32) -> RenderSettings {
+    RenderSettings { width: w, height: h, spp: 1, aov: Aov::Shaded, background, lights, ambient, part: rothray_engine::Part::WHOLE }
+}
+
 #[test]
 fn flat_pictures_match_single_ray_hits() {
     for (name, w, h) in [("bunny", 320u32, 180u32), ("sampler", 203, 117), ("logo", 160, 90)] {
@@ -12,16 +17,7 @@ fn flat_pictures_match_single_ray_hits() {
         let sf = rothray::io::load_scene(std::path::Path::new(&path)).expect("scene");
         let scene = RenderScene::from_world(&sf.world).expect("bake");
         let bg = Vec3::new(0.2, 0.3, 0.4);
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            spp: 1,
-            aov: Aov::Shaded,
-            background: bg,
-            lights: vec![],
-            ambient: 0.7,
-            part: rothray_engine::Part::WHOLE,
-        };
+        let s = shaded((w, h), bg, vec![], 0.7);
         let img = render(&scene, &sf.camera, &s, &|_, _| {}).0;
         let rays = sf.camera.rays(w, h);
         let mut hits = 0;
@@ -60,16 +56,7 @@ fn packets_and_ray_by_ray_render_the_same_pictures() {
     ] {
         let sf = rothray::io::load_scene(std::path::Path::new(&format!("{root}/{path}"))).expect("scene");
         let mut scene = RenderScene::from_world(&sf.world).expect("bake");
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            spp: 1,
-            aov: Aov::Shaded,
-            background: sf.background,
-            lights: sf.lights.clone(),
-            ambient: 0.1,
-            part: rothray_engine::Part::WHOLE,
-        };
+        let s = shaded((w, h), sf.background, sf.lights.clone(), 0.1);
         let (packets, st) = render(&scene, &sf.camera, &s, &|_, _| {});
         scene.set_ray_by_ray(true);
         let (alone, _) = render(&scene, &sf.camera, &s, &|_, _| {});
@@ -118,16 +105,7 @@ fn split_shadow_bundles_match_single_ray_shading() {
         let sf = rothray::io::load_scene(&path).expect("scene");
         let scene = RenderScene::from_world(&sf.world).expect("bake");
         let (w, h) = ([48u32, 64, 96][case], [27u32, 36, 54][case]);
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            spp: 1,
-            aov: Aov::Shaded,
-            background: sf.background,
-            lights: sf.lights.clone(),
-            ambient: 0.15,
-            part: rothray_engine::Part::WHOLE,
-        };
+        let s = shaded((w, h), sf.background, sf.lights.clone(), 0.15);
         let (img, st): (Vec<u8>, RenderStats) = render(&scene, &sf.camera, &s, &|_, _| {});
         split += st.tiles.bundles_split;
         let rays = sf.camera.rays(w, h);
