@@ -26,11 +26,33 @@ impl Group {
 }
 
 /// Boxes with ids, tested together against a ray.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct BoxList {
     groups: Vec<Group>,
     len: usize,
+    /// Where the rays start, when the boxes are nearest first from there
+    /// ([`BoxList::fill`]); else empty.
+    origins: Aabb,
+    /// Per box, its distance from `origins` shrunk by [`NEAR_SHRINK`]
+    /// (with `origins` empty: 0).
+    near: Vec<f32>,
+    /// Scratch of [`BoxList::fill`].
+    order: Vec<(f32, u32, Aabb)>,
+    keys: Vec<u64>,
 }
+
+impl Default for BoxList {
+    fn default() -> BoxList {
+        BoxList { groups: Vec::new(), len: 0, origins: Aabb::EMPTY, near: Vec::new(), order: Vec::new(), keys: Vec::new() }
+    }
+}
+
+/// A box's distance from the rays' origins is shrunk by this much before
+/// it bounds their entries into the box (see [`BoxList::near`]): the slab
+/// test's entry and the distance each round a few times (relative 1e-7
+/// each), so the shrunk distance over a ray's length stays below the
+/// entry computed.
+const NEAR_SHRINK: f32 = 1.0 - 1e-5;
 
 /// The entry `t0` of a box as the candidates of a ray are ordered by it:
 /// `+0.0` for a zero of either sign (the scalar and SIMD `min` / `max` may
@@ -51,11 +73,38 @@ impl BoxList {
     /// Forgets every box (keeps the memory).
     pub fn clear(&mut self) {
         self.groups.clear();
+        self.near.clear();
         self.len = 0;
+        self.origins = Aabb::EMPTY;
+    }
+
+    /// Makes the list the boxes `boxes` (box, id; by id) nearest first
+    /// from `origins` (then by id), the box where the rays that test them start,
+    /// so that a packet can stop at the first box farther than its lanes
+    /// reach ([`BoxList::packet_tests_within`]).
+    pub fn fill(&mut self, origins: Aabb, boxes: impl Iterator<Item = (Aabb, u32)>) {
+        self.clear();
+        let (mut order, mut keys) = (std::mem::take(&mut self.order), std::mem::take(&mut self.keys));
+        order.clear();
+        order.extend(boxes.map(|(b, id)| (origins.distance_to(&b) * NEAR_SHRINK, id, b)));
+        // Sorted as integers: a distance (not negative, or NaN for a box
+        // without a finite distance: last) then the place, which gives
+        // the ids' order (they come by index).
+        keys.clear();
+        keys.extend(order.iter().enumerate().map(|(i, o)| (o.0.to_bits() as u64) << 32 | i as u64));
+        keys.sort_unstable();
+        for &k in &keys {
+            let (near, id, b) = order[k as u32 as usize];
+            self.push(&b, id);
+            *self.near.last_mut().expect("pushed") = near;
+        }
+        self.origins = origins;
+        (self.order, self.keys) = (order, keys);
     }
 
     /// Appends box `b` with id `id`.
     pub fn push(&mut self, b: &Aabb, id: u32) {
+        self.near.push(0.0);
         let lane = self.len % 4;
         if lane == 0 {
             self.groups.push(Group::default());
@@ -144,6 +193,94 @@ impl BoxList {
                 f(g.id[j], hit, &t0);
             }
         }
+    }
+
+    /// The id of box `i` (in list order).
+    #[cfg(test)]
+    fn id(&self, i: usize) -> u32 {
+        self.groups[i / 4].id[i % 4]
+    }
+
+    /// How many groups of four boxes ([`BoxList::packet_tests_from`]).
+    #[inline(always)]
+    pub fn groups(&self) -> usize {
+        self.groups.len()
+    }
+
+    /// `f(id, lanes hit, entries)` for the boxes of groups `g`, `g + 1`
+    /// and so on (four boxes a group, the list's last group maybe fewer),
+    /// as [`BoxList::packet_tests`] makes them, while the first box of the
+    /// next group lies within the limit ([`BoxList::near`] at most
+    /// `limit`, then what `f` returns); returns the first group not tested.
+    #[inline(always)]
+    pub fn packet_tests_from(
+        &self,
+        g: usize,
+        test: &BoxTest8,
+        range: (&[f32; 8], &[f32; 8]),
+        limit: f32,
+        f: impl FnMut(u32, u32, &[f32; 8]) -> f32,
+    ) -> usize {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the CPU has AVX.
+            return unsafe { self.packet_tests_from_avx(g, test, range, limit, f) };
+        }
+        self.packet_tests_from_in(g, (test, range), limit, f, |t, b, r| t.ray_range(b, r.0, r.1))
+    }
+
+    /// [`BoxList::packet_tests_from`] with AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn packet_tests_from_avx(
+        &self,
+        g: usize,
+        test: &BoxTest8,
+        range: (&[f32; 8], &[f32; 8]),
+        limit: f32,
+        f: impl FnMut(u32, u32, &[f32; 8]) -> f32,
+    ) -> usize {
+        // SAFETY: the CPU has AVX (this function's feature).
+        self.packet_tests_from_in(g, (test, range), limit, f, |t, b, r| unsafe { t.ray_range_avx(b, r.0, r.1) })
+    }
+
+    /// [`BoxList::packet_tests_from`] with the box test `box_test`.
+    #[inline(always)]
+    fn packet_tests_from_in(
+        &self,
+        mut g: usize,
+        (test, range): (&BoxTest8, (&[f32; 8], &[f32; 8])),
+        mut limit: f32,
+        mut f: impl FnMut(u32, u32, &[f32; 8]) -> f32,
+        box_test: impl Fn(&BoxTest8, &Aabb, (&[f32; 8], &[f32; 8])) -> (u32, [f32; 8]),
+    ) -> usize {
+        while g < self.groups.len() && self.near[4 * g] <= limit {
+            let gr = &self.groups[g];
+            for j in 0..(self.len - 4 * g).min(4) {
+                let (hit, t0) = box_test(test, &gr.aabb(j), range);
+                limit = f(gr.id[j], hit, &t0);
+            }
+            g += 1;
+        }
+        g
+    }
+
+    /// How far from their origins the packet's rays (origins `o`,
+    /// directions `d`, ranges starting at `tmin`) go per unit of `t`: a box
+    /// whose [`BoxList::near`] lies past `t` times this is entered past `t`
+    /// on every ray (`|t| |d|` is at least the distance of the entry from
+    /// the origin). `None` (the distances bound nothing) unless every ray
+    /// starts where the list was filled for, and on its range's side of it.
+    pub fn reach_per_t(&self, o: &[glam::Vec3; 8], d: &[glam::Vec3; 8], tmin: &[f32; 8]) -> Option<f32> {
+        let from_origins = o.iter().all(|&p| self.origins.contains(p)) && tmin.iter().all(|&t| t >= 0.0);
+        from_origins.then(|| d.iter().fold(0.0f32, |m, v| m.max(v.length_squared())).sqrt())
+    }
+
+    /// Box `i`'s distance from the list's origins, shrunk by
+    /// [`NEAR_SHRINK`]: at most a ray from there enters the box, in units
+    /// of its direction's length (0 when not filled by [`BoxList::fill`]).
+    pub fn near(&self, i: usize) -> f32 {
+        self.near[i]
     }
 
     /// [`BoxList::packet_tests`] with the SSE2 baseline (also for tests: the same answers).
@@ -263,6 +400,80 @@ mod tests {
             n += boxes.len();
         }
         assert!(hits * 10 > n && hits < n, "{hits} of {n} boxes hit: too few or all");
+    }
+
+    /// A list filled for some origins comes nearest first (then by id),
+    /// and each box's [`BoxList::near`] is at most a ray's entry into it
+    /// times the length [`BoxList::reach_per_t`] gives, for rays from
+    /// anywhere in the origins on ranges from 0 or later: rays aimed at a
+    /// box's nearest point (where the two meet but for rounding), at
+    /// random points of it, and anywhere; boxes near and far from the
+    /// world's origin, small and large. (A shrink of `1 + 1e-6` instead of
+    /// `1 - 1e-5` fails here.)
+    #[test]
+    fn distances_bound_entries() {
+        let seed = 0xb0c7;
+        println!("seed {seed:#x}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let (mut hits, mut tight) = (0, 0);
+        for case in 0..1500 {
+            let scale = 10f32.powi(rng.gen_range(-3..4));
+            let shift = if rng.gen_bool(0.3) { Vec3::splat(rng.gen_range(-1e4..1e4)) } else { Vec3::ZERO };
+            let point = |rng: &mut SmallRng| shift + Vec3::new(pick(rng), pick(rng), pick(rng)) * scale;
+            let a = point(&mut rng);
+            let origins = if rng.gen_bool(0.5) {
+                Aabb::new(a, a)
+            } else {
+                Aabb::new(a, a + Vec3::new(rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)) * scale)
+            };
+            let boxes: Vec<Aabb> = (0..rng.gen_range(1..20))
+                .map(|_| {
+                    let lo = point(&mut rng);
+                    Aabb::new(lo, lo + Vec3::new(rng.gen_range(0.0..2.0), rng.gen_range(0.0..2.0), rng.gen_range(0.0..2.0)) * scale)
+                })
+                .collect();
+            let mut list = BoxList::default();
+            list.fill(origins, boxes.iter().enumerate().map(|(i, b)| (*b, i as u32)));
+            assert_eq!(list.len(), boxes.len());
+            for i in 1..list.len() {
+                let (p, q) = (list.near(i - 1), list.near(i));
+                assert!(p < q || (p == q && list.id(i - 1) < list.id(i)), "case {case}: place {i} out of order");
+            }
+            for _ in 0..20 {
+                let o = origins.min
+                    + (origins.max - origins.min) * Vec3::new(rng.gen_range(0.0..=1.0), rng.gen_range(0.0..=1.0), rng.gen_range(0.0..=1.0));
+                let o = o.clamp(origins.min, origins.max);
+                let b = &boxes[rng.gen_range(0..boxes.len())];
+                let aim = match rng.gen_range(0..3) {
+                    0 => o.clamp(b.min, b.max),
+                    1 => b.min + (b.max - b.min) * Vec3::new(rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)),
+                    _ => o + Vec3::new(pick(&mut rng), pick(&mut rng), pick(&mut rng)),
+                };
+                let d = (aim - o) * 10f32.powi(rng.gen_range(-2..3));
+                if d == Vec3::ZERO || !d.is_finite() {
+                    continue;
+                }
+                let tmin = if rng.gen_bool(0.7) { 0.0 } else { rng.gen_range(0.0..2.0) };
+                let ray = Ray::segment(o, d, tmin, f32::INFINITY);
+                let s = list.reach_per_t(&[o; 8], &[d; 8], &[tmin; 8]).expect("rays from the origins");
+                for i in 0..list.len() {
+                    let Some(t0) = entry(&boxes[list.id(i) as usize], &ray) else { continue };
+                    hits += 1;
+                    assert!(
+                        list.near(i) <= t0 * s,
+                        "case {case}: box {} near {} past entry {t0} x {s} of {ray:?}",
+                        list.id(i),
+                        list.near(i)
+                    );
+                    tight += (list.near(i) > 0.0 && list.near(i) > t0 * s * 0.9999) as u32;
+                }
+            }
+            // Rays that start elsewhere, or behind their ranges, get no bound.
+            assert!(list.reach_per_t(&[origins.max + Vec3::splat(scale); 8], &[Vec3::X; 8], &[0.0; 8]).is_none());
+            assert!(list.reach_per_t(&[origins.min; 8], &[Vec3::X; 8], &[-1.0; 8]).is_none());
+        }
+        println!("{hits} entries, {tight} within 1e-4 of the bound");
+        assert!(hits > 10_000 && tight > 1000, "{hits} entries, {tight} tight: too few to mean anything");
     }
 
     /// A packet's entries are each lane's own, bit for bit, in the same

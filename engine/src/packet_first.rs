@@ -9,8 +9,10 @@
 //! A lane's own visit takes, in the order of box entry then index, each
 //! object whose first surface on the range left lies before the best so
 //! far: its answer is the smallest first surface, the earlier object on a
-//! tie. Here every object the lane's box test passes is asked once on the
-//! lane's whole range, and the smallest answer is taken when it is that
+//! tie. Here the objects the lane's box test passes are asked once each on
+//! the lane's whole range, nearest box entry first, those whose entry lies
+//! within `16 eps` past the lane's best so far (the others' first surfaces
+//! lie past that too), and the smallest answer is taken when it is that
 //! visit's answer for sure:
 //! * no object is [`FirstOf::Unsure`] on the lane;
 //! * the next smallest answer lies more than `16 eps` past it (no tie, and
@@ -19,11 +21,19 @@
 //!   within a few eps of it, the margin of `RenderScene::redo`);
 //! * its box entry is not past it (the visit reaches it).
 //!
-//! Other lanes go their own way. The same boxes are tested as the lanes'
-//! own lists ([`BoxList::packet_entries`]; none for a lone object, which
-//! the evaluation takes without a box test).
+//! Other lanes go their own way.
+//!
+//! The tile lists its boxes nearest first from where its rays start
+//! ([`BoxList::fill`]), and a box's distance from there, over a ray's
+//! length, is at most the ray's entry into it. So a packet tests the boxes
+//! in that order only while the next may be entered before the nearest
+//! object met and not asked yet, and before every open lane's reach (its
+//! bound, or its range's end): a packet whose lanes all hit near stops
+//! early; one with a lane that meets nothing tests every box, as the
+//! lanes' own lists do ([`BoxList::packet_entries`]). A lone object is
+//! taken without a box test. Any-hit (shadow) lanes stop asking at their
+//! first hit.
 
-use rothray_csg::program::cand_key;
 use rothray_csg::{FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{
     box_wide::BoxTest8,
@@ -61,12 +71,33 @@ struct Best {
     unsure: u32,
     /// Some lane has a hit.
     any: u32,
+    /// The lanes still asking: all for nearest hits; for any hits, those
+    /// without one yet.
+    open: u32,
+    /// Does a lane stop asking at its first hit?
+    any_hit: bool,
 }
 
 impl Best {
-    fn new() -> Best {
+    fn new(any_hit: bool) -> Best {
         let inf = [f32::INFINITY; 8];
-        Best { t: inf, hit: [None; 8], entry: inf, second: inf, unsure: 0, any: 0 }
+        Best { t: inf, hit: [None; 8], entry: inf, second: inf, unsure: 0, any: 0, open: 0xff, any_hit }
+    }
+
+    /// How far along the open lanes any object can still change an
+    /// answer: the largest of their `near` ([`Best::near`]) cut at their
+    /// ranges' ends `tmax` (`-inf` with no lane open).
+    #[inline(always)]
+    fn reach(&self, near: &[f32; 8], tmax: &[f32; 8]) -> f32 {
+        let v: [f32; 8] = std::array::from_fn(|k| -(if near[k] < tmax[k] { near[k] } else { tmax[k] }));
+        -masked_min(self.open, &v)
+    }
+
+    /// Per lane, the entry past which no object can change its answer
+    /// (see [`RenderScene::packet_firsts`]).
+    #[inline(always)]
+    fn near(&self, eps: &[f32; 8]) -> [f32; 8] {
+        std::array::from_fn(|k| self.t[k] + 16.0 * eps[k])
     }
 
     /// Takes object `oi`'s answers `firsts` on the lanes `lanes`, whose box
@@ -91,6 +122,9 @@ impl Best {
                 }
             }
         }
+        if self.any_hit {
+            self.open &= !self.any;
+        }
     }
 }
 
@@ -105,71 +139,105 @@ pub(crate) struct PacketRays<'a> {
 /// the object, those lanes and their entries.
 pub(crate) type Met = (f32, u32, u32, [f32; 8]);
 
-/// Up to this many objects met by a packet are sorted in place.
-const FEW_MET: usize = 8;
+/// Up to this many groups of four boxes, a packet tests all its tile's
+/// boxes before it asks any object, and asks every object its lanes'
+/// bounds let through (the reach's stops cost more than they saved:
+/// benches/scenes/ground, a few objects a tile, +2.2% instructions).
+const FEW_GROUPS: usize = 2;
 
-/// The objects a packet meets, taken nearest box first
-/// ([`MetList::next_nearest`]).
+/// The objects a packet has met and not asked yet, taken nearest box
+/// entry first ([`MetList::pop`]).
 #[derive(Debug, Default)]
 pub(crate) struct MetList {
+    /// In no order.
     items: Vec<Met>,
-    /// Past [`FEW_MET`] objects: [`cand_key`]s of their entries and
-    /// places, those before `at` taken.
-    keys: Vec<u64>,
-    at: usize,
+    /// Where the nearest is (when there are any).
+    min_at: usize,
 }
 
 impl MetList {
     fn clear(&mut self) {
         self.items.clear();
+        self.min_at = 0;
     }
 
+    /// Adds object `m`.
+    #[inline(always)]
     fn push(&mut self, m: Met) {
+        if self.items.get(self.min_at).is_none_or(|n| m.0 < n.0) {
+            self.min_at = self.items.len();
+        }
         self.items.push(m);
     }
 
-    /// Readies the objects met to be taken nearest entry first: a few
-    /// (most packets of most scenes) sorted in place by entry; more keyed
-    /// (ties by place: the order met), each found when asked for. Why: a
-    /// packet mostly settles every lane with its first few objects, and
-    /// sorting all it met (their 44-byte entries) was a sixth of the
-    /// cycles of a forest of 40 000 objects flat (some 20 met per packet,
-    /// perf).
-    fn order(&mut self) {
-        self.at = 0;
-        if !self.keyed() {
-            self.items.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
-        } else {
-            self.keys.clear();
-            self.keys.extend(self.items.iter().enumerate().map(|(i, m)| cand_key(i as u32, m.0)));
-        }
+    /// The nearest entry of the objects not taken (infinite with none).
+    #[inline(always)]
+    fn nearest(&self) -> f32 {
+        self.items.get(self.min_at).map_or(f32::INFINITY, |m| m.0)
     }
 
-    /// Are the objects taken by their keys (more than a few)?
+    /// Takes the nearest object. Why not keep them sorted: a packet mostly
+    /// settles its lanes with its first few, and a scan of the rest per
+    /// take cost less than a sort of all (sorting some 20 met a packet, 44
+    /// bytes each, was a sixth of the cycles of a forest of 40 000 objects
+    /// flat, perf).
     #[inline(always)]
-    fn keyed(&self) -> bool {
-        self.items.len() > FEW_MET
-    }
-
-    /// The nearest object not taken yet (see [`MetList::order`]).
-    #[inline(always)]
-    fn next_nearest(&mut self) -> Option<Met> {
-        let i = self.at;
-        if i >= self.items.len() {
+    fn pop(&mut self) -> Option<Met> {
+        if self.items.is_empty() {
             return None;
         }
-        self.at += 1;
-        if !self.keyed() {
-            return Some(self.items[i]);
-        }
-        let (mut j, mut kj) = (i, self.keys[i]);
-        for (q, &k) in self.keys.iter().enumerate().skip(i + 1) {
-            if k < kj {
-                (j, kj) = (q, k);
+        let m = self.items.swap_remove(self.min_at);
+        self.min_at = 0;
+        for (q, n) in self.items.iter().enumerate().skip(1) {
+            if n.0 < self.items[self.min_at].0 {
+                self.min_at = q;
             }
         }
-        self.keys.swap(i, j);
-        Some(self.items[kj as u32 as usize])
+        Some(m)
+    }
+}
+
+/// Asks the objects of a tile for the first surfaces of a packet's lanes.
+struct Asker<'s, 'p> {
+    scene: &'s RenderScene,
+    p: &'p PacketRays<'p>,
+    tile: &'p TileView<'p>,
+    ranges: LaneRanges<'p>,
+    scratch: &'p mut Scratch,
+    firsts: [FirstOf; 8],
+}
+
+impl Asker<'_, '_> {
+    /// Object `oi`'s answers on the lanes `lanes` (box entries `entry`)
+    /// taken into `best`; `false` when the packet does not solve its leaves.
+    #[inline(always)]
+    fn take(&mut self, oi: u32, lanes: u32, entry: &[f32; 8], best: &mut Best) -> bool {
+        let Some(root) = self.tile.root(oi) else { return true };
+        let (scene, p, prog, ranges) = (self.scene, self.p, self.tile.prog, self.ranges);
+        let firsts = &mut self.firsts;
+        if prog.packet_first_node(&scene.leaves, root) {
+            if !p.memo.first_surfaces8(prog, &scene.leaves, root, lanes, ranges, firsts) {
+                return false;
+            }
+        } else if prog.walks_in_packets(root) {
+            scene.union_firsts(p, (prog, root), (lanes, ranges), firsts);
+        } else if prog.kind[root as usize] == NodeKind::Leaf && scene.leaves.has_torus_prep(prog.first[root as usize]) {
+            scene.torus_firsts(p, prog.first[root as usize], (lanes, ranges), self.scratch, firsts);
+        } else {
+            // Each lane's own query of the leaf on its whole range.
+            let obj = crate::scene::ObjRef { prog, root, oi };
+            for k in 0..8 {
+                if lanes & (1 << k) != 0 {
+                    let ctx = RayCtx { memo: Some((p.memo, k)), ..p.ctx[k] };
+                    firsts[k] = match scene.object_first(obj, &ctx, (ranges.tmin[k], ranges.tmax[k]), self.scratch) {
+                        Some((t, s)) => FirstOf::Hit(t, s),
+                        None => FirstOf::Miss,
+                    };
+                }
+            }
+        }
+        best.take(oi, lanes, firsts, entry);
+        true
     }
 }
 
@@ -192,63 +260,77 @@ impl RenderScene {
         let tmax: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmax);
         let eps: [f32; 8] = std::array::from_fn(|k| p.ctx[k].eps);
         let ranges = LaneRanges { tmin: &tmin, tmax: &tmax, eps: &eps };
-        let mut firsts = [FirstOf::Miss; 8];
-        met.clear();
+        let mut ask = Asker { scene: self, p, tile, ranges, scratch, firsts: [FirstOf::Miss; 8] };
         for &oi in &self.unbounded {
-            if tile.root(oi).is_some() {
-                met.push((f32::NEG_INFINITY, oi, 0xff, tmin));
+            if tile.root(oi).is_some() && best.open != 0 && !ask.take(oi, best.open, &tmin, best) {
+                return false;
             }
         }
         if list.len() == 1 {
-            met.push((f32::NEG_INFINITY, list.first_id(), 0xff, tmin));
-        } else {
-            let o = std::array::from_fn(|k| p.rays[k].origin);
-            let Some(test) = BoxTest8::new(&o, &std::array::from_fn(|k| p.rays[k].dir)) else { return false };
-            list.packet_tests(&test, (&tmin, &tmax), |oi, hit, t0| {
-                if hit != 0 {
-                    met.push((masked_min(hit, t0), oi, hit, *t0));
-                }
-            });
+            return best.open == 0 || ask.take(list.first_id(), best.open, &tmin, best);
         }
-        met.order();
-        let many = met.keyed();
-        while let Some((nearest, oi, hit, entry)) = met.next_nearest() {
-            let near: [f32; 8] = std::array::from_fn(|k| best.t[k] + 16.0 * eps[k]);
-            // The objects come by their lanes' smallest entry: once it lies
-            // past every lane's bound, so does every later one's (and the
-            // bounds only shrink), and no lane asks them. (Checked where
-            // many were met: with a few, the check cost more than the
-            // visits it saved, benches/scenes/ground +1.3% instructions.)
-            if many && nearest > near.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)) {
+        let o = std::array::from_fn(|k| p.rays[k].origin);
+        let d = std::array::from_fn(|k| p.rays[k].dir);
+        let Some(test) = BoxTest8::new(&o, &d) else { return false };
+        // The boxes come nearest first from the rays' origins, and a box's
+        // distance bounds its entries (`BoxList::reach_per_t`): boxes are
+        // tested only while the next could be entered before both the
+        // nearest met and every open lane's reach (its bound, or its
+        // range's end), and the objects met are asked nearest entry first.
+        // Past the reach no lane asks any (the bounds only shrink).
+        let (groups, mut g) = (list.groups(), 0);
+        met.clear();
+        let open = best.open;
+        let tests = |g: usize, met: &mut MetList, upto: f32, s: f32| {
+            let mut upto = upto;
+            list.packet_tests_from(g, &test, (&tmin, &tmax), upto, |oi, hit, entry| {
+                if hit & open != 0 {
+                    let m = masked_min(hit, entry);
+                    met.push((m, oi, hit, *entry));
+                    upto = upto.min(m * s);
+                }
+                upto
+            })
+        };
+        // Past the reach (in distance from the origins, `s` per unit of
+        // `t`) no lane asks any object.
+        let bound = if groups > FEW_GROUPS { list.reach_per_t(&o, &d, &tmin) } else { None };
+        let s = bound.unwrap_or_else(|| {
+            // No bound from the boxes' distances, or a few boxes: all
+            // tested first.
+            g = tests(0, met, f32::INFINITY, f32::NAN);
+            1.0
+        });
+        let mut near = best.near(&eps);
+        let mut lim = if bound.is_some() { best.reach(&near, &tmax) * s } else { f32::INFINITY };
+        loop {
+            if g < groups {
+                // Boxes tested while the next may come before the nearest
+                // met, within the reach.
+                let upto = lim.min(met.nearest() * s);
+                if list.near(4 * g) <= upto {
+                    g = tests(g, met, upto, s);
+                    continue;
+                }
+                if list.near(4 * g) > lim {
+                    // (Every later box lies past the reach too.)
+                    g = groups;
+                }
+            }
+            let Some((nearest, oi, hit, entry)) = met.pop() else { break };
+            if nearest * s > lim {
                 break;
             }
-            let lanes = hit & le_mask(&entry, &near);
-            let Some(root) = tile.root(oi) else { continue };
-            if lanes == 0 {
-                continue;
-            }
-            if tile.prog.packet_first_node(&self.leaves, root) {
-                if !p.memo.first_surfaces8(tile.prog, &self.leaves, root, lanes, ranges, &mut firsts) {
+            let lanes = hit & le_mask(&entry, &near) & best.open;
+            if lanes != 0 {
+                if !ask.take(oi, lanes, &entry, best) {
                     return false;
                 }
-            } else if tile.prog.walks_in_packets(root) {
-                self.union_firsts(p, (tile.prog, root), (lanes, ranges), &mut firsts);
-            } else if tile.prog.kind[root as usize] == NodeKind::Leaf && self.leaves.has_torus_prep(tile.prog.first[root as usize]) {
-                self.torus_firsts(p, tile.prog.first[root as usize], (lanes, ranges), scratch, &mut firsts);
-            } else {
-                // Each lane's own query of the leaf on its whole range.
-                let obj = crate::scene::ObjRef { prog: tile.prog, root, oi };
-                for k in 0..8 {
-                    if lanes & (1 << k) != 0 {
-                        let ctx = RayCtx { memo: Some((p.memo, k)), ..p.ctx[k] };
-                        firsts[k] = match self.object_first(obj, &ctx, (tmin[k], tmax[k]), scratch) {
-                            Some((t, s)) => FirstOf::Hit(t, s),
-                            None => FirstOf::Miss,
-                        };
-                    }
+                near = best.near(&eps);
+                if bound.is_some() {
+                    lim = best.reach(&near, &tmax) * s;
                 }
             }
-            best.take(oi, lanes, &firsts, &entry);
         }
         true
     }
@@ -346,7 +428,7 @@ impl RenderScene {
         (met, scratch): (&mut MetList, &mut Scratch),
         found: &mut [Option<(u32, f32, Surf)>; 8],
     ) -> u32 {
-        let mut best = Best::new();
+        let mut best = Best::new(false);
         if !self.tile_firsts(p, tile, (met, scratch), &mut best) {
             return 0;
         }
@@ -381,7 +463,7 @@ impl RenderScene {
         (met, scratch): (&mut MetList, &mut Scratch),
         out: &mut [bool],
     ) -> u32 {
-        let mut best = Best::new();
+        let mut best = Best::new(true);
         if !self.tile_firsts(p, tile, (met, scratch), &mut best) {
             return 0;
         }
@@ -401,51 +483,50 @@ mod tests {
     use super::*;
     use rand::{rngs::SmallRng, Rng, SeedableRng};
 
-    /// `MetList::next_nearest` takes the objects met in the order of their entries
-    /// (`total_cmp`), ties in the order met past `FEW_MET`: against a
-    /// stable sort of the same list, on random lists of 0 to 80 entries
-    /// with ties, infinities, zeros of both signs and NaNs.
+    /// `MetList::pop` takes the nearest object met and not taken yet, and
+    /// `MetList::nearest` tells its entry, as pushes and takes alternate
+    /// (as a packet tests boxes and asks objects in turns): against the
+    /// smallest of a plain list, on random runs of entries with ties,
+    /// infinities and zeros of both signs (box entries are never NaN).
     #[test]
-    fn objects_met_sorted_by_entry() {
-        let seed = 0x3e7_5047u64;
+    fn objects_met_taken_nearest_first() {
+        let seed = 0x3e7_5048u64;
         println!("seed {seed:#x}");
         let mut rng = SmallRng::seed_from_u64(seed);
         let mut met = MetList::default();
-        let (mut small, mut large) = (0, 0);
+        let (mut pops, mut pushes) = (0, 0);
         for case in 0..3000 {
-            let n = rng.gen_range(0..80);
-            let pick = |rng: &mut SmallRng| match rng.gen_range(0..10) {
-                0 => f32::NEG_INFINITY,
-                1 => 0.0,
-                2 => -0.0,
-                3 => 1.5,
-                4 if case % 7 == 0 => f32::NAN,
-                _ => rng.gen_range(-5.0..5.0),
-            };
-            let items: Vec<Met> = (0..n).map(|i| (pick(&mut rng), i as u32, rng.gen(), [0.0; 8])).collect();
             met.clear();
-            for &m in &items {
-                met.push(m);
-            }
-            met.order();
-            let taken: Vec<Met> = std::iter::from_fn(|| met.next_nearest()).collect();
-            let got: Vec<(u32, u32)> = taken.iter().map(|m| (m.0.to_bits(), m.1)).collect();
-            let mut want = items.clone();
-            want.sort_by(|x, y| x.0.total_cmp(&y.0));
-            if n <= FEW_MET {
-                // (In place and unstable: ties in any order.)
-                small += 1;
-                let entries = |v: &[Met]| v.iter().map(|m| m.0.to_bits()).collect::<Vec<_>>();
-                assert_eq!(entries(&taken), entries(&want), "case {case}: entries in order");
-                let mut ids: Vec<u32> = taken.iter().map(|m| m.1).collect();
-                ids.sort_unstable();
-                assert_eq!(ids, (0..n as u32).collect::<Vec<_>>(), "case {case}: a permutation");
-            } else {
-                large += 1;
-                let want: Vec<(u32, u32)> = want.iter().map(|m| (m.0.to_bits(), m.1)).collect();
-                assert_eq!(got, want, "case {case}");
+            let mut want: Vec<Met> = Vec::new();
+            for step in 0..rng.gen_range(0..80) {
+                if rng.gen_bool(0.6) {
+                    let t = match rng.gen_range(0..10) {
+                        0 => f32::NEG_INFINITY,
+                        1 => f32::INFINITY,
+                        2 => 0.0,
+                        3 => -0.0,
+                        4 => 1.5,
+                        _ => rng.gen_range(-5.0..5.0),
+                    };
+                    let m = (t, step, rng.gen(), [0.0; 8]);
+                    met.push(m);
+                    want.push(m);
+                    pushes += 1;
+                }
+                let least = want.iter().map(|m| m.0).fold(f32::INFINITY, f32::min);
+                assert_eq!(met.nearest(), least, "case {case} step {step}: nearest");
+                if rng.gen_bool(0.4) {
+                    let got = met.pop();
+                    assert_eq!(got.is_none(), want.is_empty(), "case {case} step {step}");
+                    if let Some(m) = got {
+                        assert_eq!(m.0, least, "case {case} step {step}: the nearest taken");
+                        let at = want.iter().position(|w| w.1 == m.1).expect("a met object");
+                        want.swap_remove(at);
+                        pops += 1;
+                    }
+                }
             }
         }
-        assert!(small > 100 && large > 1000, "{small} short lists, {large} long");
+        assert!(pops > 10_000 && pushes > 30_000, "{pops} takes, {pushes} pushes");
     }
 }

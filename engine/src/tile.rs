@@ -211,11 +211,9 @@ impl RenderScene {
         ts.listed = ts.live.len() - unbounded <= OBJECT_LIST;
         ts.boxes.clear();
         if ts.listed {
-            // By index (`live` is only a list of what to reset).
-            ts.live[unbounded..].sort_unstable();
-            for &oi in &ts.live[unbounded..] {
-                ts.boxes.push(&self.objects[oi as usize].bounds, oi);
-            }
+            // Nearest first from where the tile's rays start (`live` is
+            // only a list of what to reset).
+            ts.boxes.fill(region.origins(), ts.live[unbounded..].iter().map(|&oi| (self.objects[oi as usize].bounds, oi)));
         }
         ts.unions = ts.live.iter().any(|&oi| ts.tp.prog.walks_in_packets(ts.root_of[oi as usize]));
         ts.simple = ts.live.iter().all(|&oi| crate::packet_first::simple_root(&ts.tp.prog, &self.leaves, ts.root_of[oi as usize]));

@@ -53,6 +53,11 @@ impl Aabb {
     pub fn contains(&self, p: Vec3) -> bool {
         p.cmpge(self.min).all() && p.cmple(self.max).all()
     }
+    /// The distance between the nearest points of this box and `o` (0
+    /// where they touch or overlap; both non-empty).
+    pub fn distance_to(&self, o: &Aabb) -> f32 {
+        (o.min - self.max).max(self.min - o.max).max(Vec3::ZERO).length()
+    }
     /// Centre of a finite box.
     pub fn center(&self) -> Vec3 {
         (self.min + self.max) * 0.5

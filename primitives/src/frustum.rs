@@ -70,6 +70,15 @@ impl Frustum {
         Frustum(Region::Sweep { lo, hi, dir, grow: SweepGrowth { c, h, slack, inv: dir.recip() } })
     }
 
+    /// The box holding every ray's origin: the pyramid's apex, or the
+    /// sweep's box of origins.
+    pub fn origins(&self) -> Aabb {
+        match &self.0 {
+            Region::Pyramid { apex, .. } => Aabb::new(*apex, *apex),
+            Region::Sweep { lo, hi, .. } => Aabb::new(*lo, *hi),
+        }
+    }
+
     /// The plane in which each ray of the region is one point (see
     /// [`crate::ray_plane`]).
     pub fn ray_plane(&self) -> Option<crate::ray_plane::RayPlane> {
