@@ -352,6 +352,11 @@ mod tests {
     use glam::Vec3;
     use rand::{rngs::SmallRng, Rng, SeedableRng};
 
+    /// The smallest entry of the lanes hit.
+    fn masked_min_of(hit: u32, t0: &[f32; 8]) -> f32 {
+        (0..8).filter(|k| hit & (1 << k) != 0).map(|k| t0[k]).fold(f32::INFINITY, f32::min)
+    }
+
     /// A coordinate: 0, 1 or -1 (faces at rays' origins, rays along slabs)
     /// or any in [-3, 3).
     fn pick(rng: &mut SmallRng) -> f32 {
@@ -479,13 +484,14 @@ mod tests {
     /// A packet's entries are each lane's own, bit for bit, in the same
     /// order: packets of eight rays of one octant (from one point, or
     /// parallel, or scattered), ranges of every kind, boxes with faces at
-    /// the rays' origins; its box tests are the same bits in AVX and SSE2.
+    /// the rays' origins; its box tests are the same bits in AVX and SSE2,
+    /// whole and group by group to a limit ([`BoxList::packet_tests_from`]).
     #[test]
     fn packet_entries_are_each_rays() {
         let seed = 0xb0c6;
         println!("seed {seed:#x}");
         let mut rng = SmallRng::seed_from_u64(seed);
-        let (mut hits, mut n, mut packets) = (0, 0, 0);
+        let (mut hits, mut n, mut packets, mut stopped) = (0, 0, 0, 0);
         for _ in 0..2000 {
             let mut list = BoxList::default();
             let mut boxes = Vec::new();
@@ -516,6 +522,38 @@ mod tests {
             list.packet_tests(&test, range, |id, hit, t0| fast.push((id, hit, t0.map(f32::to_bits))));
             list.packet_tests_in(&test, range, |id, hit, t0| base.push((id, hit, t0.map(f32::to_bits))));
             assert_eq!(fast, base, "{rays:?}");
+            // And group by group from the nearest, to a limit that shrinks
+            // with the entries met: the same boxes, bits and stop; every
+            // group tested starts within the limit so far, the first one
+            // not tested past it.
+            let mut near_list = BoxList::default();
+            near_list.fill(Aabb::new(rays[0].origin, rays[0].origin), boxes.iter().enumerate().map(|(i, b)| (*b, i as u32)));
+            let g0 = rng.gen_range(0..near_list.groups());
+            let limit0 = if rng.gen_bool(0.3) { f32::INFINITY } else { rng.gen_range(0.0..6.0) };
+            let shrink = |limit: f32, hit: u32, t0: &[f32; 8]| if hit != 0 { limit.min(masked_min_of(hit, t0) * 2.0) } else { limit };
+            let (mut fast, mut base_seen) = (Vec::new(), Vec::new());
+            let mut lim = limit0;
+            let end = near_list.packet_tests_from(g0, &test, range, limit0, |id, hit, t0| {
+                fast.push((id, hit, t0.map(f32::to_bits), lim));
+                lim = shrink(lim, hit, t0);
+                lim
+            });
+            let mut lim = limit0;
+            let end_in = near_list.packet_tests_from_in(
+                g0,
+                (&test, range),
+                limit0,
+                |id, hit, t0| {
+                    base_seen.push((id, hit, t0.map(f32::to_bits), lim));
+                    lim = shrink(lim, hit, t0);
+                    lim
+                },
+                |t, b, r| t.ray_range(b, r.0, r.1),
+            );
+            assert_eq!((end, &fast), (end_in, &base_seen), "{rays:?}");
+            assert!(end == near_list.groups() || near_list.near(4 * end) > lim, "stopped at group {end} within the limit {lim}");
+            assert_eq!(fast.len(), (4 * end).min(near_list.len()) - 4 * g0, "whole groups tested");
+            stopped += (end < near_list.groups()) as u32;
             let mut got: [Vec<(f32, u32)>; 8] = Default::default();
             list.packet_entries(&test, (&rays.map(|r| r.tmin), &rays.map(|r| r.tmax)), lanes, &mut got);
             let bits = |v: &[(f32, u32)]| v.iter().map(|&(t, i)| (t.to_bits(), i)).collect::<Vec<_>>();
@@ -530,6 +568,8 @@ mod tests {
             }
         }
         assert!(packets > 500, "{packets} packets");
+        println!("{stopped} group walks stopped short of the list's end");
+        assert!(stopped > 100, "{stopped} group walks stopped short");
         println!("{packets} packets, {hits} of {n} boxes hit");
         assert!(hits * 10 > n && hits < n, "{hits} of {n} boxes hit: too few or all");
     }
