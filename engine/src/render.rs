@@ -483,7 +483,7 @@ fn render_impl(
                     scene.objects_touched(&frame.rays.tile_region(g0, g1, part.y0, part.y0 + rows_here), &mut among);
                 }
                 for x0 in (g0..g1).step_by(tile_w) {
-                    render_tile(&frame, wk, &mut part, (x0, (x0 + tile_w).min(w)), grouped.then_some(&among[..]), blocks);
+                    render_tile(&frame, wk, &mut part, (x0, (x0 + tile_w).min(w)), grouped.then_some(&among), blocks);
                 }
             }
             wk.group = among;

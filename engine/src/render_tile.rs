@@ -60,7 +60,7 @@ pub(crate) struct Worker {
     /// Room for ordering `lit` ([`order_along_light`]).
     order: LightOrder,
     /// The objects a group of tiles may meet (see `render.rs`).
-    pub group: Vec<u32>,
+    pub group: crate::tile::GroupObjects,
 }
 
 impl Worker {
@@ -102,7 +102,7 @@ pub(crate) fn render_tile(
     wk: &mut Worker,
     rows: &mut Rows,
     (x0, x1): (usize, usize),
-    among: Option<&[u32]>,
+    among: Option<&crate::tile::GroupObjects>,
     blocks: &mut Vec<(usize, usize)>,
 ) {
     let (w, scene, s) = (f.w, f.scene, f.s);

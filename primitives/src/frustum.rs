@@ -130,7 +130,7 @@ impl Frustum {
     /// the four at once (the same operations per slot); a region query of
     /// a tile tests hundreds of boxes.
     #[inline]
-    pub(crate) fn touches_slots(&self, rows: &[[f32; 4]; 6]) -> u32 {
+    pub fn touches_slots(&self, rows: &[[f32; 4]; 6]) -> u32 {
         use glam::Vec4;
         let lo = [Vec4::from_array(rows[0]), Vec4::from_array(rows[2]), Vec4::from_array(rows[4])];
         let hi = [Vec4::from_array(rows[1]), Vec4::from_array(rows[3]), Vec4::from_array(rows[5])];
