@@ -627,6 +627,56 @@ def forest_objects4():
     return base
 
 
+def shifted_shape(shape, dx, dz):
+    """A copy of CSG `shape` moved by (dx, 0, dz): every leaf's points, and
+    a plane's offset along its normal."""
+    t = json.loads(json.dumps(shape))
+
+    def move(node):
+        for k, v in node.items():
+            if k in ("union", "intersection", "difference"):
+                for c in v:
+                    move(c)
+            elif k == "sphere":
+                v["center"] = [v["center"][0] + dx, v["center"][1], v["center"][2] + dz]
+            elif k in ("cone", "cylinder"):
+                for p in ("a", "b"):
+                    v[p] = [v[p][0] + dx, v[p][1], v[p][2] + dz]
+            elif k == "box":
+                for p in ("min", "max"):
+                    v[p] = [v[p][0] + dx, v[p][1], v[p][2] + dz]
+            elif k == "plane":
+                n = v["normal"]
+                v["offset"] = r6(v["offset"] + n[0] * dx + n[2] * dz)
+    move(t)
+    return t
+
+
+def union4(base, name):
+    """Scene `base` (a forest: object 1 a wide union of trees) with each
+    tree copied three more times, shifted as in forest_objects4, named
+    `name`."""
+    u = base["objects"][1]["shape"]["union"]
+    shifts = [(0.37, 0.21), (-0.29, 0.41), (0.13, -0.47)]
+    u.extend([shifted_shape(t, dx, dz) for dx, dz in shifts for t in list(u)])
+    base["name"] = name
+    return base
+
+
+def forest_deep4():
+    """forest_deep with each tree copied three more times, shifted as in
+    forest_objects4: a wide union of 40 000 subtrees two levels deep. Not
+    in the suite: `gen.py --out DIR forest_deep4`."""
+    return union4(forest_deep(), "forest_deep4")
+
+
+def forest4():
+    """scenes/forest (the example) with each tree copied three more times,
+    shifted as in forest_objects4: a wide union of 40 000 leaves. Not in
+    the suite: `gen.py --out DIR forest4`."""
+    return union4(forest_with("forest4", lambda t: t), "forest4")
+
+
 def capsules3000():
     """3 000 capsules in capsules' volume, each scaled by (1/10)^(1/3)
     (as many capsules' volume as capsules' 300). Not in the suite:
@@ -636,7 +686,8 @@ def capsules3000():
 
 # Scenes made on request only (`--out DIR NAME`), for measurements outside
 # the suite.
-EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000)}
+EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000,
+                                 forest_deep4, forest4)}
 
 
 def main(argv):
