@@ -389,6 +389,7 @@ impl Spec<'_> {
         for &pos in &tp.kids[from..] {
             l.push(&plane, pos, &b.bounds[b.children[first + pos as usize] as usize]);
         }
+        l.finish(self.region.origins());
         p.lists_len += 1;
         tp.counts.lists += 1;
         tp.counts.listed += l.len() as u64;

@@ -91,12 +91,21 @@ type Pending = (f32, u32, u32, [f32; 8]);
 pub(crate) struct PendingList {
     items: Vec<Pending>,
     order: Vec<u64>,
+    /// The smallest entry of `items` (`+inf` with none).
+    nearest: f32,
 }
 
 impl PendingList {
     fn clear(&mut self) {
         self.items.clear();
         self.order.clear();
+        self.nearest = f32::INFINITY;
+    }
+
+    /// The smallest entry waiting (`+inf` with none).
+    #[inline(always)]
+    fn nearest(&self) -> f32 {
+        self.nearest
     }
 
     fn is_empty(&self) -> bool {
@@ -105,6 +114,7 @@ impl PendingList {
 
     #[inline(always)]
     fn push(&mut self, p: Pending) {
+        self.nearest = self.nearest.min(p.0);
         self.items.push(p);
     }
 
@@ -304,6 +314,11 @@ impl Visit8 for FirstWalk<'_> {
         if m != 0 {
             self.pending.push((masked_min(m, &tbox), pos, m, tbox));
         }
+    }
+
+    #[inline(always)]
+    fn bounds(&self) -> (f32, f32) {
+        (-masked_min(self.live, &self.reach.map(|r| -r)), self.pending.nearest())
     }
 
     #[inline(always)]

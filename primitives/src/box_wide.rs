@@ -52,6 +52,14 @@ pub trait Visit8 {
     /// lane (`+inf`: the walk is over); the caller may shrink lanes' range
     /// ends `thi`, which prunes their later boxes.
     fn settle(&mut self, lower: f32, thi: &mut [f32; 8]);
+    /// How far the lanes still reach (no box entered past it by every lane
+    /// changes anything), and the nearest entry of the boxes visited and
+    /// not settled yet: by default unknown (`+inf`, `+inf`: the visits
+    /// neither stop nor settle early).
+    #[inline(always)]
+    fn bounds(&self) -> (f32, f32) {
+        (f32::INFINITY, f32::INFINITY)
+    }
 }
 
 /// The packet's rays, for a visitor's own box tests.
@@ -324,6 +332,43 @@ impl BoxWide {
         if active != 0 {
             let lanes = Lanes8 { p: &p };
             for (id, b) in ids {
+                v.visit_box(id, b, active, &lanes);
+            }
+        }
+        v.settle(f32::INFINITY, thi);
+        true
+    }
+
+    /// [`BoxWide::visit_listed`] of a list nearest first: `(id, box,
+    /// near)` with `near` at most `per_t` times every lane's entry into the
+    /// box, and not decreasing. The visitor settles before a box whose
+    /// `near` lies past the nearest entry waiting (so it solves a few
+    /// children at a time, and its reach shrinks before the farther boxes
+    /// are tested), and the visits stop at the first box past every lane's
+    /// reach ([`Visit8::bounds`]). Why: a tile of a dense forest lists
+    /// some 100 children, and each packet tested every box the ray-plane
+    /// filter left and sorted every child met.
+    pub fn visit_listed_near<'b>(
+        rays: &Rays8,
+        active: u32,
+        thi: &mut [f32; 8],
+        (ids, per_t): (impl Iterator<Item = (u32, &'b Aabb, f32)>, f32),
+        v: &mut impl Visit8,
+    ) -> bool {
+        let Some(p) = Packet8::new(rays.o, rays.d) else { return false };
+        if active != 0 {
+            let lanes = Lanes8 { p: &p };
+            for (id, b, near) in ids {
+                let (reach, waiting) = v.bounds();
+                if near > reach * per_t {
+                    break;
+                }
+                if near > waiting * per_t {
+                    v.settle(near / per_t, thi);
+                    if near > v.bounds().0 * per_t {
+                        break;
+                    }
+                }
                 v.visit_box(id, b, active, &lanes);
             }
         }
