@@ -7,7 +7,7 @@
 
 use rothray_primitives::glam::Vec3;
 use rothray_primitives::ray_plane::{meets_all, RayPlane};
-use rothray_primitives::Aabb;
+use rothray_primitives::{aabb::reach_per_t, Aabb};
 
 /// See the module documentation.
 #[derive(Clone, Debug, Default)]
@@ -27,7 +27,7 @@ pub struct TileList {
     boxes: Vec<Aabb>,
     /// Where the tile's rays start ([`TileList::finish`]: the children
     /// come nearest first from there), and per child its box's distance
-    /// from there shrunk by [`NEAR_SHRINK`].
+    /// from there ([`Aabb::near_from`]).
     origins: Aabb,
     near: Vec<f32>,
     /// Scratch of [`TileList::finish`].
@@ -48,11 +48,6 @@ struct Unordered {
 /// then settled (the stops' checks cost benches/scenes/forest, forest_cut
 /// and forest_deep 1-1.5% flat with any number).
 const NEAR_WALK: usize = 24;
-
-/// A box's distance from the rays' origins is shrunk by this much before
-/// it bounds their entries (the slab test's rounding and the distance's:
-/// a few 1e-7 each; as the engine's `BoxList`).
-const NEAR_SHRINK: f32 = 1.0 - 1e-5;
 
 impl TileList {
     /// Starts the list of node `node`.
@@ -75,8 +70,7 @@ impl TileList {
         let n = self.pos.len();
         let mut order = std::mem::take(&mut self.order);
         order.clear();
-        order
-            .extend(self.boxes.iter().enumerate().map(|(i, b)| ((origins.distance_to(b) * NEAR_SHRINK).to_bits() as u64) << 32 | i as u64));
+        order.extend(self.boxes.iter().enumerate().map(|(i, b)| (b.near_from(&origins).to_bits() as u64) << 32 | i as u64));
         order.sort_unstable();
         // (Into the scratch copies, then swapped: no allocation per tile.)
         let mut was = std::mem::take(&mut self.was);
@@ -159,10 +153,8 @@ impl TileList {
         if !self.met_by(plane, (o, d), lanes, met) {
             return None;
         }
-        let from = met.len() >= NEAR_WALK
-            && self.near.len() == self.pos.len()
-            && (0..8).all(|k| lanes & (1 << k) == 0 || (self.origins.contains(o[k]) && tmin[k] >= 0.0));
-        let per_t = from.then(|| (0..8).filter(|k| lanes & (1 << k) != 0).fold(0.0f32, |m, k| m.max(d[k].length_squared())).sqrt());
+        let from = met.len() >= NEAR_WALK && self.near.len() == self.pos.len();
+        let per_t = if from { reach_per_t(&self.origins, (o, d, tmin), lanes) } else { None };
         let near = &self.near;
         Some((
             met.iter().map(move |&i| (self.pos[i as usize], &self.boxes[i as usize], near.get(i as usize).copied().unwrap_or(0.0))),

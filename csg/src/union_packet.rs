@@ -277,7 +277,7 @@ impl UnionRecords {
 fn traverse(prog: &Program, n: usize, (rays, lanes, thi): (&Rays8, u32, &mut [f32; 8]), met: &mut Vec<u32>, v: &mut impl Visit8) {
     let listed = prog.list_of(n as u32).and_then(|(l, plane)| l.for_rays_near(plane, (rays.o, rays.d, rays.tmin), lanes, met));
     match listed {
-        Some((ids, Some(per_t))) if per_t > 0.0 && per_t.is_finite() => BoxWide::visit_listed_near(rays, lanes, thi, (ids, per_t), v),
+        Some((ids, Some(per_t))) => BoxWide::visit_listed_near(rays, lanes, thi, (ids, per_t), v),
         Some((ids, _)) => BoxWide::visit_listed(rays, lanes, thi, ids.map(|(id, b, _)| (id, b)), v),
         None => prog.wide_of(n).packet.walk8(rays, lanes, thi, v),
     };

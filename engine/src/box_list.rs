@@ -33,8 +33,8 @@ pub struct BoxList {
     /// Where the rays start, when the boxes are nearest first from there
     /// ([`BoxList::fill`]); else empty.
     origins: Aabb,
-    /// Per box, its distance from `origins` shrunk by [`NEAR_SHRINK`]
-    /// (with `origins` empty: 0).
+    /// Per box, its [`Aabb::near_from`] `origins` (with `origins` empty:
+    /// 0).
     near: Vec<f32>,
     /// Scratch of [`BoxList::fill`].
     order: Vec<(f32, u32, Aabb)>,
@@ -46,13 +46,6 @@ impl Default for BoxList {
         BoxList { groups: Vec::new(), len: 0, origins: Aabb::EMPTY, near: Vec::new(), order: Vec::new(), keys: Vec::new() }
     }
 }
-
-/// A box's distance from the rays' origins is shrunk by this much before
-/// it bounds their entries into the box (see [`BoxList::near`]): the slab
-/// test's entry and the distance each round a few times (relative 1e-7
-/// each), so the shrunk distance over a ray's length stays below the
-/// entry computed.
-const NEAR_SHRINK: f32 = 1.0 - 1e-5;
 
 /// The entry `t0` of a box as the candidates of a ray are ordered by it:
 /// `+0.0` for a zero of either sign (the scalar and SIMD `min` / `max` may
@@ -86,7 +79,7 @@ impl BoxList {
         self.clear();
         let (mut order, mut keys) = (std::mem::take(&mut self.order), std::mem::take(&mut self.keys));
         order.clear();
-        order.extend(boxes.map(|(b, id)| (origins.distance_to(&b) * NEAR_SHRINK, id, b)));
+        order.extend(boxes.map(|(b, id)| (b.near_from(&origins), id, b)));
         // Sorted as integers: a distance (not negative, or NaN for a box
         // without a finite distance: last) then the place, which gives
         // the ids' order (they come by index).
@@ -265,20 +258,17 @@ impl BoxList {
         g
     }
 
-    /// How far from their origins the packet's rays (origins `o`,
-    /// directions `d`, ranges starting at `tmin`) go per unit of `t`: a box
-    /// whose [`BoxList::near`] lies past `t` times this is entered past `t`
-    /// on every ray (`|t| |d|` is at least the distance of the entry from
-    /// the origin). `None` (the distances bound nothing) unless every ray
-    /// starts where the list was filled for, and on its range's side of it.
+    /// [`reach_per_t`](rothray_primitives::aabb::reach_per_t) of the
+    /// packet's rays (origins `o`, directions `d`, ranges from `tmin`) from
+    /// where the list was filled for: `None` (the distances bound nothing)
+    /// unless every ray starts there, on its range's side.
     pub fn reach_per_t(&self, o: &[glam::Vec3; 8], d: &[glam::Vec3; 8], tmin: &[f32; 8]) -> Option<f32> {
-        let from_origins = o.iter().all(|&p| self.origins.contains(p)) && tmin.iter().all(|&t| t >= 0.0);
-        from_origins.then(|| d.iter().fold(0.0f32, |m, v| m.max(v.length_squared())).sqrt())
+        rothray_primitives::aabb::reach_per_t(&self.origins, (o, d, tmin), 0xff)
     }
 
-    /// Box `i`'s distance from the list's origins, shrunk by
-    /// [`NEAR_SHRINK`]: at most a ray from there enters the box, in units
-    /// of its direction's length (0 when not filled by [`BoxList::fill`]).
+    /// Box `i`'s [`Aabb::near_from`] the list's origins: at most where a
+    /// ray from there enters the box, in units of its direction's length
+    /// (0 when not filled by [`BoxList::fill`]).
     pub fn near(&self, i: usize) -> f32 {
         self.near[i]
     }
