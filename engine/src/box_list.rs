@@ -25,6 +25,13 @@ impl Group {
     }
 }
 
+/// A packet's box tests ([`BoxList::packet_tests_from`]): its eight rays
+/// and their ranges `(tmin, tmax)`.
+pub struct PacketBoxes<'a> {
+    pub test: &'a BoxTest8,
+    pub range: (&'a [f32; 8], &'a [f32; 8]),
+}
+
 /// Boxes with ids, tested together against a ray.
 #[derive(Clone, Debug)]
 pub struct BoxList {
@@ -202,39 +209,26 @@ impl BoxList {
 
     /// `f(id, lanes hit, entries)` for the boxes of groups `g`, `g + 1`
     /// and so on (four boxes a group, the list's last group maybe fewer),
-    /// as [`BoxList::packet_tests`] makes them, while the first box of the
-    /// next group lies within the limit ([`BoxList::near`] at most
-    /// `limit`, then what `f` returns); returns the first group not tested.
+    /// as [`BoxList::packet_tests`] makes them for packet `p`, while the
+    /// first box of the next group lies within the limit
+    /// ([`BoxList::near`] at most `limit`, then what `f` returns); returns
+    /// the first group not tested.
     #[inline(always)]
-    pub fn packet_tests_from(
-        &self,
-        g: usize,
-        test: &BoxTest8,
-        range: (&[f32; 8], &[f32; 8]),
-        limit: f32,
-        f: impl FnMut(u32, u32, &[f32; 8]) -> f32,
-    ) -> usize {
+    pub fn packet_tests_from(&self, g: usize, p: &PacketBoxes, limit: f32, f: impl FnMut(u32, u32, &[f32; 8]) -> f32) -> usize {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX.
-            return unsafe { self.packet_tests_from_avx(g, test, range, limit, f) };
+            return unsafe { self.packet_tests_from_avx(g, p, limit, f) };
         }
-        self.packet_tests_from_in(g, (test, range), limit, f, |t, b, r| t.ray_range(b, r.0, r.1))
+        self.packet_tests_from_in(g, p, limit, f, |t, b, r| t.ray_range(b, r.0, r.1))
     }
 
     /// [`BoxList::packet_tests_from`] with AVX.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn packet_tests_from_avx(
-        &self,
-        g: usize,
-        test: &BoxTest8,
-        range: (&[f32; 8], &[f32; 8]),
-        limit: f32,
-        f: impl FnMut(u32, u32, &[f32; 8]) -> f32,
-    ) -> usize {
+    unsafe fn packet_tests_from_avx(&self, g: usize, p: &PacketBoxes, limit: f32, f: impl FnMut(u32, u32, &[f32; 8]) -> f32) -> usize {
         // SAFETY: the CPU has AVX (this function's feature).
-        self.packet_tests_from_in(g, (test, range), limit, f, |t, b, r| unsafe { t.ray_range_avx(b, r.0, r.1) })
+        self.packet_tests_from_in(g, p, limit, f, |t, b, r| unsafe { t.ray_range_avx(b, r.0, r.1) })
     }
 
     /// [`BoxList::packet_tests_from`] with the box test `box_test`.
@@ -242,7 +236,7 @@ impl BoxList {
     fn packet_tests_from_in(
         &self,
         mut g: usize,
-        (test, range): (&BoxTest8, (&[f32; 8], &[f32; 8])),
+        p: &PacketBoxes,
         mut limit: f32,
         mut f: impl FnMut(u32, u32, &[f32; 8]) -> f32,
         box_test: impl Fn(&BoxTest8, &Aabb, (&[f32; 8], &[f32; 8])) -> (u32, [f32; 8]),
@@ -250,7 +244,7 @@ impl BoxList {
         while g < self.groups.len() && self.near[4 * g] <= limit {
             let gr = &self.groups[g];
             for j in 0..(self.len - 4 * g).min(4) {
-                let (hit, t0) = box_test(test, &gr.aabb(j), range);
+                let (hit, t0) = box_test(p.test, &gr.aabb(j), p.range);
                 limit = f(gr.id[j], hit, &t0);
             }
             g += 1;
@@ -523,7 +517,8 @@ mod tests {
             let shrink = |limit: f32, hit: u32, t0: &[f32; 8]| if hit != 0 { limit.min(masked_min_of(hit, t0) * 2.0) } else { limit };
             let (mut fast, mut base_seen) = (Vec::new(), Vec::new());
             let mut lim = limit0;
-            let end = near_list.packet_tests_from(g0, &test, range, limit0, |id, hit, t0| {
+            let pb = PacketBoxes { test: &test, range };
+            let end = near_list.packet_tests_from(g0, &pb, limit0, |id, hit, t0| {
                 fast.push((id, hit, t0.map(f32::to_bits), lim));
                 lim = shrink(lim, hit, t0);
                 lim
@@ -531,7 +526,7 @@ mod tests {
             let mut lim = limit0;
             let end_in = near_list.packet_tests_from_in(
                 g0,
-                (&test, range),
+                &pb,
                 limit0,
                 |id, hit, t0| {
                     base_seen.push((id, hit, t0.map(f32::to_bits), lim));

@@ -41,7 +41,7 @@ use rothray_primitives::{
     LeafTable, Surf,
 };
 
-use crate::box_list::BoxList;
+use crate::box_list::{BoxList, PacketBoxes};
 use crate::scene::{sure_first, Ray, RenderScene};
 use crate::tile::TileView;
 
@@ -283,7 +283,7 @@ impl RenderScene {
         let open = best.open;
         let tests = |g: usize, met: &mut MetList, upto: f32, s: f32| {
             let mut upto = upto;
-            list.packet_tests_from(g, &test, (&tmin, &tmax), upto, |oi, hit, entry| {
+            list.packet_tests_from(g, &PacketBoxes { test: &test, range: (&tmin, &tmax) }, upto, |oi, hit, entry| {
                 if hit & open != 0 {
                     let m = masked_min(hit, entry);
                     met.push((m, oi, hit, *entry));
