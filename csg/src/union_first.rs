@@ -45,7 +45,7 @@
 use rothray_primitives::{
     box_wide::{Lanes8, Visit8},
     kernels8::{Ranges8, Rays8Soa},
-    mask8::{le_mask, masked_min},
+    mask8::{le_mask, masked_max, masked_min},
     Aabb, LeafTable, Span, Surf,
 };
 
@@ -87,12 +87,18 @@ type Pending = (f32, u32, u32, [f32; 8]);
 /// thread, 1920x1080 flat), in a list kept from walk to walk (a stack
 /// array of 64 keys cleared per `settle`, and `sort_unstable`, were some
 /// 100 instructions a walk of benches/scenes/forest's union, callgrind).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(crate) struct PendingList {
     items: Vec<Pending>,
     order: Vec<u64>,
     /// The smallest entry of `items` (`+inf` with none).
     nearest: f32,
+}
+
+impl Default for PendingList {
+    fn default() -> PendingList {
+        PendingList { items: Vec::new(), order: Vec::new(), nearest: f32::INFINITY }
+    }
 }
 
 impl PendingList {
@@ -318,7 +324,7 @@ impl Visit8 for FirstWalk<'_> {
 
     #[inline(always)]
     fn bounds(&self) -> (f32, f32) {
-        (-masked_min(self.live, &self.reach.map(|r| -r)), self.pending.nearest())
+        (masked_max(self.live, &self.reach), self.pending.nearest())
     }
 
     #[inline(always)]

@@ -37,7 +37,7 @@
 use rothray_csg::{FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{
     box_wide::BoxTest8,
-    mask8::{le_mask, masked_min},
+    mask8::{le_mask, masked_max, masked_min},
     LeafTable, Surf,
 };
 
@@ -89,8 +89,7 @@ impl Best {
     /// ranges' ends `tmax` (`-inf` with no lane open).
     #[inline(always)]
     fn reach(&self, near: &[f32; 8], tmax: &[f32; 8]) -> f32 {
-        let v: [f32; 8] = std::array::from_fn(|k| -(if near[k] < tmax[k] { near[k] } else { tmax[k] }));
-        -masked_min(self.open, &v)
+        masked_max(self.open, &std::array::from_fn(|k| if near[k] < tmax[k] { near[k] } else { tmax[k] }))
     }
 
     /// Per lane, the entry past which no object can change its answer
@@ -297,7 +296,8 @@ impl RenderScene {
         let bound = if groups > FEW_GROUPS { list.reach_per_t(&o, &d, &tmin) } else { None };
         let s = bound.unwrap_or_else(|| {
             // No bound from the boxes' distances, or a few boxes: all
-            // tested first.
+            // tested first (with a NaN scale the limit stays infinite:
+            // `min` ignores a NaN).
             g = tests(0, met, f32::INFINITY, f32::NAN);
             1.0
         });

@@ -50,6 +50,13 @@ pub fn masked_min(m: u32, t: &[f32; 8]) -> f32 {
     }
 }
 
+/// The largest of the lanes `m` of `t` ([`masked_min`] of the negated
+/// lanes, negated: the same bits); `-inf` when `m` holds none of the eight.
+#[inline(always)]
+pub fn masked_max(m: u32, t: &[f32; 8]) -> f32 {
+    -masked_min(m, &t.map(|x| -x))
+}
+
 /// The lanes `k` where `a[k] <= b[k]` (bit `k`; false where either is NaN).
 #[inline(always)]
 pub fn le_mask(a: &[f32; 8], b: &[f32; 8]) -> u32 {
