@@ -7,7 +7,10 @@
 
 use rothray_primitives::glam::Vec3;
 use rothray_primitives::ray_plane::{meets_all, RayPlane};
-use rothray_primitives::{aabb::reach_per_t, Aabb};
+use rothray_primitives::{
+    aabb::{near_of_key, nearest_first, reach_per_t},
+    Aabb,
+};
 
 /// See the module documentation.
 #[derive(Clone, Debug, Default)]
@@ -69,9 +72,7 @@ impl TileList {
     pub(crate) fn finish(&mut self, origins: Aabb) {
         let n = self.pos.len();
         let mut order = std::mem::take(&mut self.order);
-        order.clear();
-        order.extend(self.boxes.iter().enumerate().map(|(i, b)| (b.near_from(&origins).to_bits() as u64) << 32 | i as u64));
-        order.sort_unstable();
+        nearest_first(&origins, self.boxes.iter(), &mut order);
         // (Into the scratch copies, then swapped: no allocation per tile.)
         let mut was = std::mem::take(&mut self.was);
         was.pos.clear();
@@ -81,7 +82,7 @@ impl TileList {
             let i = k as u32 as usize;
             was.pos.push(self.pos[i]);
             was.boxes.push(self.boxes[i]);
-            self.near.push(f32::from_bits((k >> 32) as u32));
+            self.near.push(near_of_key(k));
         }
         for (a, v) in self.shadows.iter_mut().enumerate() {
             was.shadows[a].clear();

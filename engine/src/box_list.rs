@@ -4,7 +4,11 @@
 //! the arithmetic of [`Aabb::ray_range`] lane by lane, so a box's entry is the
 //! one [`entry`] gives on the scalar path (after [`canonical`]).
 
-use rothray_primitives::{box_wide::BoxTest8, Aabb, Ray};
+use rothray_primitives::{
+    aabb::{near_of_key, nearest_first},
+    box_wide::BoxTest8,
+    Aabb, Ray,
+};
 
 /// Four boxes, SoA; lanes past `len` are unused.
 #[derive(Clone, Copy, Debug, Default)]
@@ -44,7 +48,7 @@ pub struct BoxList {
     /// 0).
     near: Vec<f32>,
     /// Scratch of [`BoxList::fill`].
-    order: Vec<(f32, u32, Aabb)>,
+    order: Vec<(Aabb, u32)>,
     keys: Vec<u64>,
 }
 
@@ -81,22 +85,17 @@ impl BoxList {
     /// Makes the list the boxes `boxes` (box, id; by id) nearest first
     /// from `origins` (then by id), the box where the rays that test them start,
     /// so that a packet can stop at the first box farther than its lanes
-    /// reach ([`BoxList::packet_tests_within`]).
+    /// reach ([`BoxList::packet_tests_from`]).
     pub fn fill(&mut self, origins: Aabb, boxes: impl Iterator<Item = (Aabb, u32)>) {
         self.clear();
         let (mut order, mut keys) = (std::mem::take(&mut self.order), std::mem::take(&mut self.keys));
         order.clear();
-        order.extend(boxes.map(|(b, id)| (b.near_from(&origins), id, b)));
-        // Sorted as integers: a distance (not negative, or NaN for a box
-        // without a finite distance: last) then the place, which gives
-        // the ids' order (they come by index).
-        keys.clear();
-        keys.extend(order.iter().enumerate().map(|(i, o)| (o.0.to_bits() as u64) << 32 | i as u64));
-        keys.sort_unstable();
+        order.extend(boxes);
+        nearest_first(&origins, order.iter().map(|(b, _)| b), &mut keys);
         for &k in &keys {
-            let (near, id, b) = order[k as u32 as usize];
+            let (b, id) = order[k as u32 as usize];
             self.push(&b, id);
-            *self.near.last_mut().expect("pushed") = near;
+            *self.near.last_mut().expect("pushed") = near_of_key(k);
         }
         self.origins = origins;
         (self.order, self.keys) = (order, keys);

@@ -37,6 +37,23 @@ pub fn reach_per_t(origins: &Aabb, (o, d, tmin): (&[Vec3; 8], &[Vec3; 8], &[f32;
     (from && s > 0.0 && s.is_finite()).then_some(s)
 }
 
+/// Keys that put boxes nearest first from `origins` ([`Aabb::near_from`]),
+/// then in their given order, into `keys`, sorted: each key is a box's
+/// bound in its high 32 bits (not negative, so its bits order as its value;
+/// NaN last) and its place among `boxes` in the low 32 ([`near_of_key`],
+/// `key as u32`). Why keys: sorting 8-byte integers instead of the boxes.
+pub fn nearest_first<'a>(origins: &Aabb, boxes: impl Iterator<Item = &'a Aabb>, keys: &mut Vec<u64>) {
+    keys.clear();
+    keys.extend(boxes.enumerate().map(|(i, b)| (b.near_from(origins).to_bits() as u64) << 32 | i as u64));
+    keys.sort_unstable();
+}
+
+/// The bound a key of [`nearest_first`] holds.
+#[inline(always)]
+pub fn near_of_key(k: u64) -> f32 {
+    f32::from_bits((k >> 32) as u32)
+}
+
 impl Aabb {
     /// The empty box (union identity).
     pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
