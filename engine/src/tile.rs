@@ -5,7 +5,7 @@
 //! its rays nothing.
 
 use rothray_csg::{Program, TileCounts, TileProgram};
-use rothray_primitives::frustum::Frustum;
+use rothray_primitives::frustum::{slot_rows, Frustum};
 
 use crate::box_list::BoxList;
 use crate::scene::RenderScene;
@@ -46,20 +46,8 @@ impl GroupObjects {
 
     /// Makes the rows of the ids' boxes (`bounds`).
     fn make_rows(&mut self, bounds: impl Fn(u32) -> rothray_primitives::Aabb) {
-        const EMPTY: [f32; 4] = [f32::INFINITY; 4];
-        const FULL: [f32; 4] = [f32::NEG_INFINITY; 4];
         self.rows.clear();
-        for four in self.ids.chunks(4) {
-            let mut r = [EMPTY, FULL, EMPTY, FULL, EMPTY, FULL];
-            for (j, &oi) in four.iter().enumerate() {
-                let b = bounds(oi);
-                for a in 0..3 {
-                    r[2 * a][j] = b.min[a];
-                    r[2 * a + 1][j] = b.max[a];
-                }
-            }
-            self.rows.push(r);
-        }
+        self.rows.extend(self.ids.chunks(4).map(|four| slot_rows(four.iter().map(|&oi| bounds(oi)))));
     }
 
     /// The objects whose boxes `region` may touch ([`Frustum::touches_box`],

@@ -43,6 +43,21 @@ struct SweepGrowth {
     inv: Vec3,
 }
 
+/// Up to four boxes as the rows [`Frustum::touches_slots`] tests (min x,
+/// max x, min y, max y, min z, max z); the slots past the boxes given are
+/// empty (min above max).
+pub fn slot_rows(boxes: impl IntoIterator<Item = Aabb>) -> [[f32; 4]; 6] {
+    let (lo, hi) = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
+    let mut r = [lo, hi, lo, hi, lo, hi];
+    for (j, b) in boxes.into_iter().enumerate().take(4) {
+        for a in 0..3 {
+            r[2 * a][j] = b.min[a];
+            r[2 * a + 1][j] = b.max[a];
+        }
+    }
+    r
+}
+
 impl Frustum {
     /// The pyramid from `apex` spanned by `edges` (in order around it, either
     /// way round).

@@ -134,17 +134,7 @@ impl Wide {
 /// subtrees laid out after their parent depth first. `leaf(n)` turns a binary
 /// leaf into its child code (`LEAF | payload`).
 pub(crate) fn collapse(bin: &[BvhNode], mut leaf: impl FnMut(&BvhNode) -> u32) -> Vec<Node4> {
-    let empty = Node4 {
-        b: [
-            [f32::INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-            [f32::INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-            [f32::INFINITY; 4],
-            [f32::NEG_INFINITY; 4],
-        ],
-        child: [0; 4],
-    };
+    let empty = Node4 { b: crate::frustum::slot_rows([]), child: [0; 4] };
     let half_area = |n: &BvhNode| {
         let e = n.max - n.min;
         e.x * e.y + e.y * e.z + e.z * e.x
