@@ -31,7 +31,7 @@ pub const OBJECT_LIST: usize = 256;
 /// by one, some 200 boxes to keep 50 in a forest of 40 000 objects (a
 /// tenth of its time flat, perf).
 #[derive(Default)]
-pub struct GroupObjects {
+pub(crate) struct GroupObjects {
     ids: Vec<u32>,
     /// Per four objects, their boxes' `[min x, max x, min y, max y, min z,
     /// max z]` (empty past the last: min above max).
