@@ -28,7 +28,7 @@ pub mod tile_list;
 pub use counts::{take_eval_counts, EvalCounts};
 pub use edits::{Edit, EditLog};
 pub use follow::FollowCounts;
-pub use program::object_packet::{FirstOf, LaneRanges};
+pub use program::object_packet::{FirstOf, Firsts8, LaneRanges};
 pub use program::{first_surface, leaf_asks_again, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
 pub use spans::{combine, spill_count, Op, SpanList};
 pub use tile::{TileCounts, TileProgram};

@@ -34,7 +34,7 @@
 //! taken without a box test. Any-hit (shadow) lanes stop asking at their
 //! first hit.
 
-use rothray_csg::{FirstOf, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
+use rothray_csg::{FirstOf, Firsts8, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{
     box_wide::BoxTest8,
     mask8::{le_mask, masked_max, masked_min},
@@ -102,23 +102,20 @@ impl Best {
     /// Takes object `oi`'s answers `firsts` on the lanes `lanes`, whose box
     /// entries are `entry`.
     #[inline(always)]
-    fn take(&mut self, oi: u32, lanes: u32, firsts: &[FirstOf; 8], entry: &[f32; 8]) {
-        let mut m = lanes;
+    fn take(&mut self, oi: u32, lanes: u32, firsts: &Firsts8, entry: &[f32; 8]) {
+        let hit = firsts.hit & lanes;
+        self.unsure |= firsts.unsure & lanes;
+        self.any |= hit;
+        let mut m = hit;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
-            match firsts[k] {
-                FirstOf::Miss => {}
-                FirstOf::Unsure => self.unsure |= 1 << k,
-                FirstOf::Hit(t, s) => {
-                    self.any |= 1 << k;
-                    if t < self.t[k] {
-                        self.second[k] = self.t[k];
-                        (self.t[k], self.hit[k], self.entry[k]) = (t, Some((oi, s)), entry[k]);
-                    } else {
-                        self.second[k] = self.second[k].min(t);
-                    }
-                }
+            let t = firsts.t[k];
+            if t < self.t[k] {
+                self.second[k] = self.t[k];
+                (self.t[k], self.hit[k], self.entry[k]) = (t, Some((oi, firsts.surf(k))), entry[k]);
+            } else {
+                self.second[k] = self.second[k].min(t);
             }
         }
         if self.any_hit {
@@ -203,7 +200,7 @@ struct Asker<'s, 'p> {
     tile: &'p TileView<'p>,
     ranges: LaneRanges<'p>,
     scratch: &'p mut Scratch,
-    firsts: [FirstOf; 8],
+    firsts: Firsts8,
 }
 
 impl Asker<'_, '_> {
@@ -228,10 +225,11 @@ impl Asker<'_, '_> {
             for k in 0..8 {
                 if lanes & (1 << k) != 0 {
                     let ctx = RayCtx { memo: Some((p.memo, k)), ..p.ctx[k] };
-                    firsts[k] = match scene.object_first(obj, &ctx, (ranges.tmin[k], ranges.tmax[k]), self.scratch) {
+                    let f = match scene.object_first(obj, &ctx, (ranges.tmin[k], ranges.tmax[k]), self.scratch) {
                         Some((t, s)) => FirstOf::Hit(t, s),
                         None => FirstOf::Miss,
                     };
+                    firsts.set(k, f);
                 }
             }
         }
@@ -259,7 +257,7 @@ impl RenderScene {
         let tmax: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmax);
         let eps: [f32; 8] = std::array::from_fn(|k| p.ctx[k].eps);
         let ranges = LaneRanges { tmin: &tmin, tmax: &tmax, eps: &eps };
-        let mut ask = Asker { scene: self, p, tile, ranges, scratch, firsts: [FirstOf::Miss; 8] };
+        let mut ask = Asker { scene: self, p, tile, ranges, scratch, firsts: Firsts8::default() };
         for &oi in &self.unbounded {
             if tile.root(oi).is_some() && best.open != 0 && !ask.take(oi, best.open, &tmin, best) {
                 return false;
@@ -345,7 +343,7 @@ impl RenderScene {
     /// lone torus's instructions (a torus of benches/scenes/tori alone,
     /// callgrind 960x540: 167 a lane of 1 070 a packet met).
     #[inline(never)]
-    fn torus_firsts(&self, p: &PacketRays, leaf: u32, (lanes, ray): (u32, LaneRanges), scratch: &mut Scratch, out: &mut [FirstOf; 8]) {
+    fn torus_firsts(&self, p: &PacketRays, leaf: u32, (lanes, ray): (u32, LaneRanges), scratch: &mut Scratch, out: &mut Firsts8) {
         let mut m = lanes;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
@@ -353,20 +351,21 @@ impl RenderScene {
             let (tmax, eps) = (ray.tmax[k], ray.eps[k]);
             scratch.out.clear();
             let Some(v) = p.memo.torus_lane(&self.leaves, leaf, k, ((ray.tmin[k], tmax), true), &mut scratch.out) else {
-                out[k] = FirstOf::Unsure;
+                out.set(k, FirstOf::Unsure);
                 continue;
             };
             let spans = scratch.out.as_slice();
             // (`leaf_spans` asks again in full here.)
             if rothray_csg::leaf_asks_again(spans, (v, tmax), eps) {
-                out[k] = FirstOf::Unsure;
+                out.set(k, FirstOf::Unsure);
                 continue;
             }
-            out[k] = match sure_first(spans, (v.min(tmax), tmax), eps) {
+            let f = match sure_first(spans, (v.min(tmax), tmax), eps) {
                 Some(Some((t, s))) => FirstOf::Hit(t, s),
                 Some(None) => FirstOf::Miss,
                 None => FirstOf::Unsure,
             };
+            out.set(k, f);
         }
     }
 
@@ -381,7 +380,7 @@ impl RenderScene {
     /// records (candidate lists, object visits, the evaluator's entry) were
     /// some 10% of the cycles (perf, one thread).
     #[inline(never)]
-    fn union_firsts(&self, p: &PacketRays, (prog, root): (&Program, u32), (lanes, ranges): (u32, LaneRanges), out: &mut [FirstOf; 8]) {
+    fn union_firsts(&self, p: &PacketRays, (prog, root): (&Program, u32), (lanes, ranges): (u32, LaneRanges), out: &mut Firsts8) {
         let b = &prog.bounds[root as usize];
         // The lanes whose range meets the root's box (the others miss it).
         let mut met = 0u32;
@@ -391,12 +390,12 @@ impl RenderScene {
                 if b.ray_range(ray.origin, ray.inv_dir, ranges.tmin[k], ranges.tmax[k]).is_some() {
                     met |= 1 << k;
                 } else {
-                    out[k] = FirstOf::Miss;
+                    out.set(k, FirstOf::Miss);
                 }
             }
         }
         p.memo.union_lanes((prog, &self.leaves), root, (met, ranges.tmin, ranges.tmax), |k, rec| {
-            out[k] = match rec {
+            let f = match rec {
                 None => FirstOf::Unsure,
                 Some((spans, v)) => {
                     let hi = ranges.tmax[k];
@@ -406,6 +405,7 @@ impl RenderScene {
                     }
                 }
             };
+            out.set(k, f);
         });
     }
 
