@@ -37,7 +37,7 @@
 use rothray_csg::{FirstOf, Firsts8, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{
     box_wide::BoxTest8,
-    mask8::{le_mask, masked_max, masked_min},
+    mask8::{gt_mask, le_mask, masked_max, masked_min},
     LeafTable, Surf,
 };
 
@@ -62,7 +62,12 @@ pub(crate) fn simple_root(prog: &Program, leaves: &LeafTable, n: u32) -> bool {
 /// The lanes' smallest answers so far.
 struct Best {
     t: [f32; 8],
-    hit: [Option<(u32, Surf)>; 8],
+    /// The lanes with a smallest answer, and whose it is: the object, its
+    /// surface's leaf and sub-surface (arrays: see `Firsts8`).
+    has: u32,
+    oi: [u32; 8],
+    leaf: [u32; 8],
+    sub: [u32; 8],
     /// The smallest one's box entry.
     entry: [f32; 8],
     /// The next smallest answer.
@@ -81,7 +86,7 @@ struct Best {
 impl Best {
     fn new(any_hit: bool) -> Best {
         let inf = [f32::INFINITY; 8];
-        Best { t: inf, hit: [None; 8], entry: inf, second: inf, unsure: 0, any: 0, open: 0xff, any_hit }
+        Best { t: inf, has: 0, oi: [0; 8], leaf: [0; 8], sub: [0; 8], entry: inf, second: inf, unsure: 0, any: 0, open: 0xff, any_hit }
     }
 
     /// How far along the open lanes any object can still change an
@@ -113,7 +118,9 @@ impl Best {
             let t = firsts.t[k];
             if t < self.t[k] {
                 self.second[k] = self.t[k];
-                (self.t[k], self.hit[k], self.entry[k]) = (t, Some((oi, firsts.surf(k))), entry[k]);
+                (self.t[k], self.oi[k], self.entry[k]) = (t, oi, entry[k]);
+                (self.leaf[k], self.sub[k]) = (firsts.leaf[k], firsts.sub[k]);
+                self.has |= 1 << k;
             } else {
                 self.second[k] = self.second[k].min(t);
             }
@@ -432,22 +439,20 @@ impl RenderScene {
         if !self.tile_firsts(p, tile, (met, scratch), &mut best) {
             return 0;
         }
-        let mut settled = 0u32;
+        // A lane is settled unless some object was unsure on it, or its
+        // smallest answer has another within `16 eps` past it, or its box
+        // entry past it. (All lanes at once: lane by lane, with the answers
+        // in options, this took 4% more instructions on a scene of one
+        // ground box, 1.3% on benches/scenes/capsules and logo, callgrind
+        // 480x270 flat.)
+        let eps: [f32; 8] = std::array::from_fn(|k| p.ctx[k].eps);
+        let near = best.near(&eps);
+        let sure = gt_mask(&best.second, &near) & le_mask(&best.entry, &best.t);
+        let settled = !best.unsure & (!best.has | sure) & 0xff;
         for k in 0..8 {
-            if best.unsure & (1 << k) != 0 {
-                continue;
+            if settled & (1 << k) != 0 {
+                found[k] = (best.has & (1 << k) != 0).then(|| (best.oi[k], best.t[k], Surf { leaf: best.leaf[k], sub: best.sub[k] }));
             }
-            found[k] = match best.hit[k] {
-                None => None,
-                Some((oi, s)) => {
-                    let tk = best.t[k];
-                    if !(best.second[k] > tk + 16.0 * p.ctx[k].eps && best.entry[k] <= tk) {
-                        continue;
-                    }
-                    Some((oi, tk, s))
-                }
-            };
-            settled |= 1 << k;
         }
         rothray_csg::counts::object_lanes(settled.count_ones(), 8 - settled.count_ones());
         settled

@@ -65,6 +65,13 @@ pub fn le_mask(a: &[f32; 8], b: &[f32; 8]) -> u32 {
     half(0) | half(1) << 4
 }
 
+/// The lanes `k` where `a[k] > b[k]` (bit `k`; false where either is NaN).
+#[inline(always)]
+pub fn gt_mask(a: &[f32; 8], b: &[f32; 8]) -> u32 {
+    let half = |h: usize| Vec4::from_slice(&a[4 * h..]).cmpgt(Vec4::from_slice(&b[4 * h..])).bitmask();
+    half(0) | half(1) << 4
+}
+
 /// Per 4-bit lane set, the lanes as all-ones words.
 #[cfg(target_arch = "x86_64")]
 #[repr(align(16))]
@@ -91,7 +98,7 @@ static LANES: Lanes = Lanes({
 mod tests {
     use super::*;
 
-    /// Both helpers against their scalar definitions, for every mask, with
+    /// The helpers against their scalar definitions, for every mask, with
     /// infinities, zeros and (in lanes outside the mask, or compared) NaNs.
     #[test]
     fn masked_reductions_match_scalar_loops() {
@@ -115,15 +122,17 @@ mod tests {
                 }
             }
             let mut want = f32::INFINITY;
-            let mut le = 0;
+            let (mut le, mut gt) = (0, 0);
             for k in 0..8 {
                 if m & (1 << k) != 0 {
                     want = want.min(t[k]);
                 }
                 le |= ((t[k] <= u[k]) as u32) << k;
+                gt |= ((t[k] > u[k]) as u32) << k;
             }
             assert_eq!(masked_min(m, &t), want, "case {case}: mask {m:#x} of {t:?}");
             assert_eq!(le_mask(&t, &u), le, "case {case}: {t:?} <= {u:?}");
+            assert_eq!(gt_mask(&t, &u), gt, "case {case}: {t:?} > {u:?}");
         }
     }
 }
