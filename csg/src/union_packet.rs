@@ -58,15 +58,16 @@ impl UnionRecords {
 }
 
 impl PacketMemo {
-    /// Lets the evaluations of the packet `ctx` (its lanes `lanes`, which
-    /// must share a direction octant) walk wide leaf unions together: the
-    /// first lane to ask for one walks it for all of them.
-    pub fn walk_unions_for(&mut self, ctx: &[RayCtx; 8], lanes: u32) {
+    /// Lets the evaluations of the packet of `rays` with tolerances `eps`
+    /// (the contexts its lanes evaluate with; its lanes `lanes`, which must
+    /// share a direction octant) walk wide leaf unions together: the first
+    /// lane to ask for one walks it for all of them.
+    pub fn walk_unions_for(&mut self, (rays, eps): (&[Ray; 8], &[f32; 8]), lanes: u32) {
         let u = self.unions.get_mut();
         u.len = 0;
-        u.lanes = if forms_packet(&ctx.each_ref().map(|c| c.ray.dir)) { lanes } else { 0 };
+        u.lanes = if forms_packet(&rays.each_ref().map(|r| r.dir)) { lanes } else { 0 };
         u.rays.clear();
-        u.rays.extend(ctx.iter().map(|c| (c.ray, c.eps)));
+        u.rays.extend(rays.iter().zip(eps).map(|(r, &e)| (*r, e)));
     }
 
     /// Lane `k`'s result of wide leaf union `n` of `prog` in nearest mode on

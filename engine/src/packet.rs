@@ -250,13 +250,13 @@ fn solves_leaves(tile: Option<&TileView>) -> bool {
 /// Readies `memo` for a packet of eight plain rays (`ctx`, no memo yet) of
 /// `tile`: its wide unions walked and its analytic leaves solved for all
 /// lanes when the first lane asks.
-fn ready_memo(memo: &mut PacketMemo, ctx: &[RayCtx; 8], tile: Option<&TileView>) {
+fn ready_memo(memo: &mut PacketMemo, (rays, eps): (&[Ray; 8], &[f32; 8]), tile: Option<&TileView>) {
     memo.clear();
     if tile.is_some_and(|t| t.unions) {
-        memo.walk_unions_for(ctx, 0xff);
+        memo.walk_unions_for((rays, eps), 0xff);
     }
     if solves_leaves(tile) {
-        memo.solve_leaves_for(|k| (ctx[k].ray.origin, ctx[k].ray.dir), 0xff);
+        memo.solve_leaves_for(|k| (rays[k].origin, rays[k].dir), 0xff);
     }
 }
 
@@ -466,8 +466,7 @@ impl RenderScene {
         }
         // The tile's wide unions, walked for the packet's rays on demand.
         if unions {
-            let plain: [RayCtx; 8] = std::array::from_fn(|k| RayCtx { ray: rays[k], eps: eps[k], memo: None });
-            ps.memo.walk_unions_for(&plain, left);
+            ps.memo.walk_unions_for((rays[..8].try_into().expect("eight rays"), &eps), left);
         }
         // Its analytic leaves, solved for all lanes when the first asks.
         if solves_leaves(tile) {
@@ -523,12 +522,13 @@ impl RenderScene {
     /// an analytic leaf (and walks a tile's wide union of leaves) for all
     /// eight rays when the first of them asks for it.
     fn lane_packet(&self, rays: &[Ray], ps: &mut PacketScratch, out: &mut [Option<Hit>], normals: bool, tile: Option<&TileView>) {
-        let plain = self.ray_ctx8(rays);
-        ready_memo(&mut ps.memo, &plain, tile);
+        let rays: &[Ray; 8] = rays[..8].try_into().expect("eight rays");
+        let eps = self.eps8(rays);
+        ready_memo(&mut ps.memo, (rays, &eps), tile);
         let mut found = [None; 8];
         // Lanes settled by the objects' packet answers (`packet_first.rs`).
         let settled =
-            self.packet_nearest(&PacketRays { rays, ctx: &plain, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), &mut found);
+            self.packet_nearest(&PacketRays { rays, eps: &eps, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), &mut found);
         if settled == 0xff {
             for o in out.iter_mut().take(8) {
                 *o = None;
@@ -543,7 +543,7 @@ impl RenderScene {
             if settled & (1 << k) != 0 {
                 continue;
             }
-            let ctx = RayCtx { memo: Some((memo, k)), ..plain[k] };
+            let ctx = RayCtx { ray: rays[k], eps: eps[k], memo: Some((memo, k)) };
             found[k] = self.nearest_ctx(&ctx, &mut ps.scratch, tile, listed.then_some(&mut ps.listed[k]));
         }
         self.make_hits(rays, &found, normals, out);
@@ -562,12 +562,13 @@ impl RenderScene {
         let dir_bits = |r: &Ray| r.dir.to_array().map(f32::to_bits);
         let parallel = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| dir_bits(r) == dir_bits(&rays[0]));
         if n == 8 && !self.ray_by_ray && (shares_work(tile) || parallel) && all_plain(rays[..8].try_into().expect("eight rays")) {
-            let ctx = self.ray_ctx8(rays);
-            ready_memo(&mut ps.memo, &ctx, tile);
+            let rays: &[Ray; 8] = rays[..8].try_into().expect("eight rays");
+            let eps = self.eps8(rays);
+            ready_memo(&mut ps.memo, (rays, &eps), tile);
             if parallel {
                 self.walk_meshes_parallel(rays, &mut ps.memo);
             }
-            let settled = self.packet_any(&PacketRays { rays, ctx: &ctx, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), out);
+            let settled = self.packet_any(&PacketRays { rays, eps: &eps, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), out);
             if settled == 0xff {
                 return;
             }
@@ -577,7 +578,7 @@ impl RenderScene {
                 if settled & (1 << k) != 0 {
                     continue;
                 }
-                let lane = RayCtx { memo: Some((memo, k)), ..ctx[k] };
+                let lane = RayCtx { ray: rays[k], eps: eps[k], memo: Some((memo, k)) };
                 out[k] = self.occluded_listed(&lane, &mut ps.scratch, tile, listed.then_some(&mut ps.listed[k]));
             }
         } else {
@@ -689,11 +690,11 @@ impl RenderScene {
 mod tests {
     use super::*;
 
-    /// `ray_ctx8` gives every lane the context `ray_ctx` gives its ray, bit
+    /// `eps8` gives every lane the tolerance of the context `ray_ctx` gives its ray, bit
     /// for bit: rays from near and far (where the tolerance grows with the
     /// distance), of unit and other lengths, one origin or eight.
     #[test]
-    fn ray_ctx8_is_ray_ctx_per_lane() {
+    fn eps8_is_ray_ctx_per_lane() {
         use crate::components::Sphere;
         use rand::{rngs::SmallRng, Rng, SeedableRng};
         let seed = 0x7c8u64;
@@ -715,11 +716,11 @@ mod tests {
                 let d = Vec3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)) * len;
                 Ray::new(o, d)
             });
-            let c8 = scene.ray_ctx8(&rays);
+            let eps = scene.eps8(&rays);
             for k in 0..8 {
                 let c1 = scene.ray_ctx(&rays[k]);
-                assert_eq!(c8[k].eps.to_bits(), c1.eps.to_bits(), "case {case} lane {k}: {:?}", rays[k]);
-                assert_eq!(c8[k].ray, c1.ray, "case {case} lane {k}");
+                assert_eq!(eps[k].to_bits(), c1.eps.to_bits(), "case {case} lane {k}: {:?}", rays[k]);
+                assert_eq!(rays[k], c1.ray, "case {case} lane {k}");
             }
         }
     }

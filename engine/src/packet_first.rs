@@ -133,9 +133,18 @@ impl Best {
 
 /// The packet's lanes as the objects are asked about them.
 pub(crate) struct PacketRays<'a> {
-    pub(crate) rays: &'a [Ray],
-    pub(crate) ctx: &'a [RayCtx<'a>; 8],
+    pub(crate) rays: &'a [Ray; 8],
+    /// Each lane's tolerance (its context's `eps`, `RenderScene::eps8`).
+    pub(crate) eps: &'a [f32; 8],
     pub(crate) memo: &'a PacketMemo,
+}
+
+impl PacketRays<'_> {
+    /// Lane `k`'s context, with the packet's memo.
+    #[inline(always)]
+    fn lane(&self, k: usize) -> RayCtx<'_> {
+        RayCtx { ray: self.rays[k], eps: self.eps[k], memo: Some((self.memo, k)) }
+    }
 }
 
 /// An object the packet meets: the smallest of its lanes' box entries,
@@ -231,7 +240,7 @@ impl Asker<'_, '_> {
             let obj = crate::scene::ObjRef { prog, root, oi };
             for k in 0..8 {
                 if lanes & (1 << k) != 0 {
-                    let ctx = RayCtx { memo: Some((p.memo, k)), ..p.ctx[k] };
+                    let ctx = p.lane(k);
                     let f = match scene.object_first(obj, &ctx, (ranges.tmin[k], ranges.tmax[k]), self.scratch) {
                         Some((t, s)) => FirstOf::Hit(t, s),
                         None => FirstOf::Miss,
@@ -262,8 +271,7 @@ impl RenderScene {
     ) -> bool {
         let tmin: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmin);
         let tmax: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmax);
-        let eps: [f32; 8] = std::array::from_fn(|k| p.ctx[k].eps);
-        let ranges = LaneRanges { tmin: &tmin, tmax: &tmax, eps: &eps };
+        let ranges = LaneRanges { tmin: &tmin, tmax: &tmax, eps: p.eps };
         let mut ask = Asker { scene: self, p, tile, ranges, scratch, firsts: Firsts8::default() };
         for &oi in &self.unbounded {
             if tile.root(oi).is_some() && best.open != 0 && !ask.take(oi, best.open, &tmin, best) {
@@ -306,7 +314,7 @@ impl RenderScene {
             g = tests(0, met, f32::INFINITY, f32::NAN);
             1.0
         });
-        let mut near = best.near(&eps);
+        let mut near = best.near(p.eps);
         let mut lim = if bound.is_some() { best.reach(&near, &tmax) * s } else { f32::INFINITY };
         loop {
             if g < groups {
@@ -331,7 +339,7 @@ impl RenderScene {
                 if !ask.take(oi, lanes, &entry, best) {
                     return false;
                 }
-                near = best.near(&eps);
+                near = best.near(p.eps);
                 if bound.is_some() {
                     lim = best.reach(&near, &tmax) * s;
                 }
@@ -393,7 +401,7 @@ impl RenderScene {
         let mut met = 0u32;
         for k in 0..8 {
             if lanes & (1 << k) != 0 {
-                let ray = &p.ctx[k].ray;
+                let ray = &p.rays[k];
                 if b.ray_range(ray.origin, ray.inv_dir, ranges.tmin[k], ranges.tmax[k]).is_some() {
                     met |= 1 << k;
                 } else {
@@ -445,8 +453,7 @@ impl RenderScene {
         // in options, this took 4% more instructions on a scene of one
         // ground box, 1.3% on benches/scenes/capsules and logo, callgrind
         // 480x270 flat.)
-        let eps: [f32; 8] = std::array::from_fn(|k| p.ctx[k].eps);
-        let near = best.near(&eps);
+        let near = best.near(p.eps);
         let sure = gt_mask(&best.second, &near) & le_mask(&best.entry, &best.t);
         let settled = !best.unsure & (!best.has | sure) & 0xff;
         for k in 0..8 {

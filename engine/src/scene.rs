@@ -254,17 +254,18 @@ impl RenderScene {
         RayCtx::new(*ray, self.eps_at(ray.origin))
     }
 
-    /// The contexts of a packet's eight rays ([`RenderScene::ray_ctx`]), the
-    /// same bits. Plain loops, not `std::array::from_fn` (through it the
-    /// eight were a call each where the compiler chose not to inline it:
-    /// +1.2% wall on benches/scenes/tori flat). The lengths and divisions
-    /// go lane after lane through arrays, so that the compiler does them
-    /// four or eight at a time (a vector square root or division rounds
-    /// each lane as the scalar one does): -1% wall on capsules and tori
-    /// flat, one thread.
+    /// The tolerances of a packet's eight rays: the `eps` of the context
+    /// [`RenderScene::ray_ctx`] gives each, the same bits. (The contexts
+    /// themselves are made only for the lanes evaluated alone: copying the
+    /// eight rays into them was some 65 instructions a packet, callgrind.)
+    /// Plain loops, not `std::array::from_fn` (through it the eight were a
+    /// call each where the compiler chose not to inline it: +1.2% wall on
+    /// benches/scenes/tori flat). The lengths and divisions go lane after
+    /// lane through arrays, so that the compiler does them four or eight at
+    /// a time (a vector square root or division rounds each lane as the
+    /// scalar one does): -1% wall on capsules and tori flat, one thread.
     #[inline(always)]
-    pub(crate) fn ray_ctx8(&self, rays: &[Ray]) -> [RayCtx<'static>; 8] {
-        let rays: &[Ray; 8] = rays[..8].try_into().expect("eight rays");
+    pub(crate) fn eps8(&self, rays: &[Ray; 8]) -> [f32; 8] {
         let (mut far, mut dir) = ([0.0f32; 8], [0.0f32; 8]);
         for k in 0..8 {
             far[k] = (rays[k].origin - self.center).length();
@@ -275,11 +276,7 @@ impl RenderScene {
             // `eps_at`, then `RayCtx::new`.
             eps[k] = self.eps_at_distance(far[k]) / dir[k];
         }
-        let mut c = [RayCtx { ray: rays[0], eps: 0.0, memo: None }; 8];
-        for k in 0..8 {
-            c[k] = RayCtx { ray: rays[k], eps: eps[k], memo: None };
-        }
-        c
+        eps
     }
 
     /// The length tolerance of rays from `o` (see [`RenderScene::ray_ctx`]).
