@@ -47,9 +47,6 @@ pub(crate) struct LeafRecords {
     generation: u32,
     /// Per slot: (leaf, generation, its lanes).
     slots: Vec<(u32, u32, Ranges8)>,
-    /// The rays as given (for the tile lists' slab tests).
-    o: [Vec3; 8],
-    d: [Vec3; 8],
     /// Per torus slot: (leaf, generation, its lanes' preps).
     tori: Vec<(u32, u32, [Option<TorusPrep>; 8])>,
     /// The entries of one tile list that the packet's rays meet.
@@ -100,9 +97,6 @@ impl PacketMemo {
         r.generation = r.generation.wrapping_add(1).max(1);
         r.lanes = lanes;
         r.rays = Rays8Soa::from_lanes(&ray);
-        for k in 0..8 {
-            (r.o[k], r.d[k]) = ray(k);
-        }
     }
 
     /// The lanes of the packet whose leaves this memo solves (0: none).
@@ -190,14 +184,18 @@ impl PacketMemo {
         f: impl FnOnce(&TileList, &[u32], &[Slabs8]) -> R,
     ) -> Option<R> {
         let mut guard = self.leaf_solves.borrow_mut();
-        let LeafRecords { lanes, generation, o, d, list_met, .. } = &mut *guard;
+        let LeafRecords { lanes, rays, generation, list_met, .. } = &mut *guard;
         if *lanes & (1 << k) == 0 {
             return None;
         }
         if list_met.key != key || list_met.generation != *generation {
-            list_met.ok = list.met_by(plane, (o, d), *lanes, &mut list_met.met);
+            // (The rays back in lanes here, for this rare list only: kept
+            // beside the packet's SoA rays, their copies were some 64
+            // instructions a packet, callgrind.)
+            let (o, d): ([Vec3; 8], [Vec3; 8]) = (std::array::from_fn(|k| rays.lane(k).0), std::array::from_fn(|k| rays.lane(k).1));
+            list_met.ok = list.met_by(plane, (&o, &d), *lanes, &mut list_met.met);
             (list_met.key, list_met.generation) = (key, *generation);
-            met_slabs(list, list_met, (o, d));
+            met_slabs(list, list_met, (&o, &d));
         }
         list_met.ok.then(|| f(list, &list_met.met, &list_met.slabs))
     }
