@@ -414,7 +414,7 @@ fn leaf_firsts(r: &Ranges8, leaf: u32, lanes: u32, ray: LaneRanges, out: &mut Fi
     // end, with no zero compared to a zero): a lane the solve did not do
     // is unsure; one it did that misses the leaf, or whose clipped span is
     // empty or has no real boundary, misses; else its first real boundary.
-    let (mut real, mut enter) = (0u32, 0u32);
+    let mut real = 0u32;
     for h in [0, 4] {
         let (t0, t1) = (Vec4::from_slice(&r.t0[h..]), Vec4::from_slice(&r.t1[h..]));
         let (lo, hi) = (Vec4::from_slice(&ray.tmin[h..]), Vec4::from_slice(&ray.tmax[h..]));
@@ -423,13 +423,16 @@ fn leaf_firsts(r: &Ranges8, leaf: u32, lanes: u32, ray: LaneRanges, out: &mut Fi
         let c0 = Vec4::select(real0, t0, t0.max(lo));
         let c1 = Vec4::select(real1, t1, t1.min(hi));
         real |= (c1.cmpgt(c0) & (real0 | real1)).bitmask() << h;
-        enter |= real0.bitmask() << h;
         Vec4::select(real0, c0, c1).write_to_slice(&mut out.t[h..]);
+        // The entry's or the exit's sub-surface, picked as bits (a select
+        // moves bits; no float operation touches them).
+        let bits = |s: &[u32; 8]| Vec4::from_array(std::array::from_fn(|i| f32::from_bits(s[h + i])));
+        let sub = Vec4::select(real0, bits(&r.s0), bits(&r.s1)).to_array();
+        for i in 0..4 {
+            out.sub[h + i] = sub[i].to_bits();
+        }
     }
-    for k in 0..8 {
-        out.leaf[k] = leaf;
-        out.sub[k] = if enter & (1 << k) != 0 { r.s0[k] } else { r.s1[k] };
-    }
+    out.leaf = [leaf; 8];
     out.hit = (out.hit & !lanes) | (lanes & r.done & r.hit & real);
     out.unsure = (out.unsure & !lanes) | (lanes & !r.done);
 }
