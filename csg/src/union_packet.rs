@@ -23,6 +23,7 @@
 use glam::Vec4;
 use rothray_primitives::{
     box_wide::{forms_packet, BoxWide, Lanes8, Rays8, Visit8},
+    mask8::fill_lanes,
     Aabb, LeafTable, Ray, Span,
 };
 
@@ -158,17 +159,21 @@ impl UnionRecords {
     fn walk(&mut self, memo: &PacketMemo, prog: &Program, leaves: &LeafTable, n: u32) -> usize {
         let nu = n as usize;
         let lanes = self.lanes;
-        let o: [_; 8] = std::array::from_fn(|k| self.rays[k].0.origin);
-        let d: [_; 8] = std::array::from_fn(|k| self.rays[k].0.dir);
-        let tmin: [f32; 8] = std::array::from_fn(|k| self.rays[k].0.tmin);
-        let tmax: [f32; 8] = std::array::from_fn(|k| self.rays[k].0.tmax);
+        // (Filled in place: see `fill_lanes`.)
+        let (mut o, mut d) = ([glam::Vec3::ZERO; 8], [glam::Vec3::ZERO; 8]);
+        let (mut tmin, mut tmax) = ([0.0f32; 8], [0.0f32; 8]);
+        fill_lanes(&mut o, |k| self.rays[k].0.origin);
+        fill_lanes(&mut d, |k| self.rays[k].0.dir);
+        fill_lanes(&mut tmin, |k| self.rays[k].0.tmin);
+        fill_lanes(&mut tmax, |k| self.rays[k].0.tmax);
         let rays = Rays8 { o: &o, d: &d, tmin: &tmin };
         // The lanes whose first entry stands clear of every other child's
         // are answered at once (`union_first.rs`); the others walk.
         let mut first: [Option<LaneFirst>; 8] = [None; 8];
         let mut starts = [f32::INFINITY; 8];
         if prog.wide_of(nu).unbounded.is_empty() {
-            let eps = std::array::from_fn(|k| self.rays[k].1);
+            let mut eps = [0.0f32; 8];
+            fill_lanes(&mut eps, |k| self.rays[k].1);
             let mut fw = FirstWalk::new((prog, nu, leaves, memo), (&o, &d), (tmin, tmax, eps), lanes, &mut self.pending);
             let mut thi = tmax;
             traverse(prog, nu, (&rays, lanes, &mut thi), &mut self.met, &mut fw);

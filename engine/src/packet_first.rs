@@ -37,7 +37,8 @@
 use rothray_csg::{FirstOf, Firsts8, LaneRanges, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{
     box_wide::BoxTest8,
-    mask8::{gt_mask, le_mask, masked_max, masked_min},
+    glam::Vec3,
+    mask8::{fill_lanes, gt_mask, le_mask, masked_max, masked_min},
     LeafTable, Surf,
 };
 
@@ -282,8 +283,9 @@ impl RenderScene {
         (met, scratch): (&mut MetList, &mut Scratch),
         best: &mut Best,
     ) -> bool {
-        let tmin: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmin);
-        let tmax: [f32; 8] = std::array::from_fn(|k| p.rays[k].tmax);
+        let (mut tmin, mut tmax) = ([0.0; 8], [0.0; 8]);
+        fill_lanes(&mut tmin, |k| p.rays[k].tmin);
+        fill_lanes(&mut tmax, |k| p.rays[k].tmax);
         let ranges = LaneRanges { tmin: &tmin, tmax: &tmax, eps: p.eps };
         let mut ask = Asker { scene: self, p, tile, ranges, scratch, firsts: Firsts8::default() };
         for &oi in &self.unbounded {
@@ -294,8 +296,9 @@ impl RenderScene {
         if list.len() == 1 {
             return best.open == 0 || ask.take(list.first_id(), best.open, &tmin, best);
         }
-        let o = std::array::from_fn(|k| p.rays[k].origin);
-        let d = std::array::from_fn(|k| p.rays[k].dir);
+        let (mut o, mut d) = ([Vec3::ZERO; 8], [Vec3::ZERO; 8]);
+        fill_lanes(&mut o, |k| p.rays[k].origin);
+        fill_lanes(&mut d, |k| p.rays[k].dir);
         let Some(test) = BoxTest8::new(&o, &d) else { return false };
         // The boxes come nearest first from the rays' origins, and a box's
         // distance bounds its entries (`BoxList::reach_per_t`): boxes are

@@ -72,6 +72,19 @@ pub fn gt_mask(a: &[f32; 8], b: &[f32; 8]) -> u32 {
     half(0) | half(1) << 4
 }
 
+/// Sets the eight lanes of `a` to `f(0)..f(7)` in place, by a plain loop:
+/// an array made by `std::array::from_fn` (or returned by value) was made
+/// aside and moved with 16-byte loads across its lanes' narrower stores,
+/// which stalled on store forwarding (a packet's rays' origins, 12 bytes
+/// each, were some 12% of `tile_firsts`'s cycles on
+/// benches/scenes/forest_objects flat, perf).
+#[inline(always)]
+pub fn fill_lanes<T>(a: &mut [T; 8], f: impl Fn(usize) -> T) {
+    for (k, x) in a.iter_mut().enumerate() {
+        *x = f(k);
+    }
+}
+
 /// Per 4-bit lane set, the lanes as all-ones words.
 #[cfg(target_arch = "x86_64")]
 #[repr(align(16))]
