@@ -299,7 +299,7 @@ impl RenderScene {
         let (mut o, mut d) = ([Vec3::ZERO; 8], [Vec3::ZERO; 8]);
         fill_lanes(&mut o, |k| p.rays[k].origin);
         fill_lanes(&mut d, |k| p.rays[k].dir);
-        let Some(test) = BoxTest8::new(&o, &d) else { return false };
+        let Some(test) = BoxTest8::from_lanes(|k| p.rays[k].origin, |k| p.rays[k].dir) else { return false };
         // The boxes come nearest first from the rays' origins, and a box's
         // distance bounds its entries (`BoxList::reach_per_t`): boxes are
         // tested only while the next could be entered before both the

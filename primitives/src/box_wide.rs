@@ -90,6 +90,12 @@ impl BoxTest8 {
         Packet8::new(o, d).map(BoxTest8)
     }
 
+    /// [`BoxTest8::new`] of the rays `o(k) + t d(k)`, read where they are.
+    #[inline]
+    pub fn from_lanes(o: impl Fn(usize) -> Vec3, d: impl Fn(usize) -> Vec3) -> Option<BoxTest8> {
+        Packet8::from_lanes(o, d).map(BoxTest8)
+    }
+
     /// [`Lanes8::ray_range`]: per lane what [`Aabb::ray_range`] gives, bit
     /// for bit.
     #[inline(always)]

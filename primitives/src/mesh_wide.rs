@@ -653,8 +653,14 @@ impl F8 {
 /// and ~5% of the renderer's mesh walk, callgrind.)
 #[inline(always)]
 pub(crate) fn axis_signs(d: &[Vec3; 8], a: usize) -> ([Vec4; 2], u32, u32) {
-    let h0 = Vec4::new(d[0][a], d[1][a], d[2][a], d[3][a]);
-    let h1 = Vec4::new(d[4][a], d[5][a], d[6][a], d[7][a]);
+    axis_signs_of(|k| d[k], a)
+}
+
+/// [`axis_signs`] of the directions `d(0)..d(7)`.
+#[inline(always)]
+pub(crate) fn axis_signs_of(d: impl Fn(usize) -> Vec3, a: usize) -> ([Vec4; 2], u32, u32) {
+    let h0 = Vec4::new(d(0)[a], d(1)[a], d(2)[a], d(3)[a]);
+    let h1 = Vec4::new(d(4)[a], d(5)[a], d(6)[a], d(7)[a]);
     let neg = h0.cmplt(Vec4::ZERO).bitmask() | h1.cmplt(Vec4::ZERO).bitmask() << 4;
     let pos = h0.cmpgt(Vec4::ZERO).bitmask() | h1.cmpgt(Vec4::ZERO).bitmask() << 4;
     ([h0, h1], neg, pos)
@@ -675,10 +681,18 @@ impl Packet8 {
     /// zero (the caller traces them one by one).
     #[inline(always)]
     pub(crate) fn new(o: &[Vec3; 8], d: &[Vec3; 8]) -> Option<Packet8> {
+        Packet8::from_lanes(|k| o[k], |k| d[k])
+    }
+
+    /// [`Packet8::new`] of the rays `o(k) + t d(k)`, read lane by lane
+    /// where they are (an array of the origins made just before and read
+    /// here with wider loads stalled on store forwarding).
+    #[inline(always)]
+    pub(crate) fn from_lanes(o: impl Fn(usize) -> Vec3, d: impl Fn(usize) -> Vec3) -> Option<Packet8> {
         let mut near = [0usize; 3];
         let mut inv = [F8([0.0; 8]); 3];
         for a in 0..3 {
-            let ([h0, h1], neg, pos) = axis_signs(d, a);
+            let ([h0, h1], neg, pos) = axis_signs_of(&d, a);
             // One octant, no zero component.
             if !(neg == 0xff || pos == 0xff) {
                 return None;
@@ -689,7 +703,13 @@ impl Packet8 {
             i0.write_to_slice(&mut inv[a].0[..4]);
             i1.write_to_slice(&mut inv[a].0[4..]);
         }
-        Some(Packet8 { o: std::array::from_fn(|a| F8(std::array::from_fn(|k| o[k][a]))), inv, near })
+        let mut po = [F8([0.0; 8]); 3];
+        for (a, pa) in po.iter_mut().enumerate() {
+            for k in 0..8 {
+                pa.0[k] = o(k)[a];
+            }
+        }
+        Some(Packet8 { o: po, inv, near })
     }
 
     /// Per child: the rays (bit k = ray k) whose `[tlo, thi]` meets its box, and
