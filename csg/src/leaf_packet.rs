@@ -192,7 +192,10 @@ impl PacketMemo {
             // (The rays back in lanes here, for this rare list only: kept
             // beside the packet's SoA rays, their copies were some 64
             // instructions a packet, callgrind.)
-            let (o, d): ([Vec3; 8], [Vec3; 8]) = (std::array::from_fn(|k| rays.lane(k).0), std::array::from_fn(|k| rays.lane(k).1));
+            let (mut o, mut d) = ([Vec3::ZERO; 8], [Vec3::ZERO; 8]);
+            for k in 0..8 {
+                (o[k], d[k]) = rays.lane(k);
+            }
             list_met.ok = list.met_by(plane, (&o, &d), *lanes, &mut list_met.met);
             (list_met.key, list_met.generation) = (key, *generation);
             met_slabs(list, list_met, (&o, &d));

@@ -98,9 +98,10 @@ impl Firsts8 {
         Surf { leaf: self.leaf[k], sub: self.sub[k] }
     }
 
-    /// Lane `k` as a [`FirstOf`].
-    #[inline]
-    pub fn get(&self, k: usize) -> FirstOf {
+    /// Lane `k` as a [`FirstOf`] (for the tests: the packet reads the
+    /// masks and arrays).
+    #[cfg(test)]
+    fn get(&self, k: usize) -> FirstOf {
         if self.hit & (1 << k) != 0 {
             FirstOf::Hit(self.t[k], self.surf(k))
         } else if self.unsure & (1 << k) != 0 {

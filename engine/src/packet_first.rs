@@ -296,9 +296,6 @@ impl RenderScene {
         if list.len() == 1 {
             return best.open == 0 || ask.take(list.first_id(), best.open, &tmin, best);
         }
-        let (mut o, mut d) = ([Vec3::ZERO; 8], [Vec3::ZERO; 8]);
-        fill_lanes(&mut o, |k| p.rays[k].origin);
-        fill_lanes(&mut d, |k| p.rays[k].dir);
         let Some(test) = BoxTest8::from_lanes(|k| p.rays[k].origin, |k| p.rays[k].dir) else { return false };
         // The boxes come nearest first from the rays' origins, and a box's
         // distance bounds its entries (`BoxList::reach_per_t`): boxes are
@@ -322,7 +319,14 @@ impl RenderScene {
         };
         // Past the reach (in distance from the origins, `s` per unit of
         // `t`) no lane asks any object.
-        let bound = if groups > FEW_GROUPS { list.reach_per_t(&o, &d, &tmin) } else { None };
+        let bound = if groups > FEW_GROUPS {
+            let (mut o, mut d) = ([Vec3::ZERO; 8], [Vec3::ZERO; 8]);
+            fill_lanes(&mut o, |k| p.rays[k].origin);
+            fill_lanes(&mut d, |k| p.rays[k].dir);
+            list.reach_per_t(&o, &d, &tmin)
+        } else {
+            None
+        };
         let s = bound.unwrap_or_else(|| {
             // No bound from the boxes' distances, or a few boxes: all
             // tested first (with a NaN scale the limit stays infinite:
