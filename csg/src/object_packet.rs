@@ -349,9 +349,9 @@ impl PacketMemo {
 const TORUS_NODE_EVENTS: usize = 16;
 
 /// A lane's spans of a torus (at most three on a line).
-struct TorusSpans {
-    s: [Span; 3],
-    n: usize,
+pub(crate) struct TorusSpans {
+    pub(crate) s: [Span; 3],
+    pub(crate) n: usize,
 }
 
 impl Default for TorusSpans {

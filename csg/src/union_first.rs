@@ -22,6 +22,11 @@
 //! candidate lists, merges and memo look-ups) were most of the trace's
 //! cycles while the leaves' solves were an eighth (perf, `LaneWalks::take`).
 //!
+//! A ring torus among the children has no 8-lane solve: each lane reads
+//! its nearest query from the packet's preps, the answer its own walk reads
+//! (`FirstWalk::take_torus`). Any other leaf without a packet kernel (a
+//! sweep, a mesh) stops the walk: every lane walks in order.
+//!
 //! A wide union of small trees ([`Program::is_meet_union`]: a forest of
 //! trees cut by half-spaces, of rounded or hollowed pieces) is walked the
 //! same way when its children are kernel leaves, intersections and
@@ -49,6 +54,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Span, Surf,
 };
 
+use super::object_packet::TorusSpans;
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
 use super::tree_first::{done_by, solved_late, tree_first, TreeShape, TREE_LEAVES};
@@ -359,6 +365,10 @@ impl FirstWalk<'_> {
                 NodeKind::Leaf => {
                     let leaf = self.prog.first[c];
                     if !self.leaves.has_kernel8(leaf) {
+                        if self.leaves.has_torus_prep(leaf) {
+                            self.take_torus(leaf, m, &tbox);
+                            continue;
+                        }
                         self.stop();
                         break;
                     }
@@ -397,6 +407,54 @@ impl FirstWalk<'_> {
         let mut r = Ranges8::default();
         self.leaves.ranges8_beside(leaf, &Rays8Soa::new(self.rays.0, self.rays.1), self.live, &mut r);
         r
+    }
+
+    /// Takes child leaf `leaf`, a ring torus (no 8-lane solve), for the
+    /// lanes `m` whose box entries are `tbox`: each lane's nearest query on
+    /// its whole range from the packet's preps ([`PacketMemo::torus_lane`],
+    /// the answer its lane walk reads). Its first span counts only where
+    /// it starts on the range with a real entry and is longer than `8 eps`
+    /// (as a small tree's, [`FirstWalk::take_first`]): then its entry is
+    /// the one polished root a shorter range's query gives too, and a
+    /// settled lane's answer is that entry cut at `v` (its exit never
+    /// read). Later spans, a short first span, and the place the answer
+    /// stops being exact (the next span may start there) bound the second
+    /// start, so no lane settles where the torus might come first or fuse
+    /// (margins: a nearest query's later span, or its stop, lies past its
+    /// first span's exit).
+    /// A lane outside the preps, or starting inside the torus, is left to
+    /// its walk. Why: one torus among a union's children stopped the walk
+    /// for every lane (a forest whose trunks were rings: 4.0x POV-Ray's
+    /// speed flat, against 5.9x for the forest).
+    #[inline(never)]
+    fn take_torus(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
+        let mut m = m;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            counts::wide_child();
+            let (lo, hi, eps) = (self.tmin[k], self.tmax[k], self.eps[k]);
+            let mut spans = TorusSpans::default();
+            let Some(v) = self.memo.torus_lane(self.leaves, leaf, k, ((lo, hi), true), &mut spans) else {
+                self.live &= !(1 << k);
+                continue;
+            };
+            self.second[k] = self.second[k].min(v);
+            let Some(first) = spans.s[..spans.n].first().copied() else { continue };
+            if !first.s0.is_real() {
+                // Inside at the range's start.
+                self.live &= !(1 << k);
+                continue;
+            }
+            for s in &spans.s[1..spans.n] {
+                self.second[k] = self.second[k].min(s.t0);
+            }
+            if first.t1 - first.t0 > 8.0 * eps {
+                self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox[k]);
+            } else {
+                self.second[k] = self.second[k].min(first.t0);
+            }
+        }
     }
 
     /// Takes child `c`, an intersection or difference of a few kernel
