@@ -677,13 +677,14 @@ fn first_entries_of_unions(seed0: u64, deep: bool) {
 
 /// Packets of a tile find the first entries of wide unions whose children
 /// are ring tori among kernel leaves (`FirstWalk::take_torus`: each lane's
-/// nearest query of a torus from the packet's preps), and every ray still
+/// nearest query of a torus from the packet's preps) and nodes of a torus
+/// and a kernel leaf (`FirstWalk::take_torus_node`), and every ray still
 /// gets exactly what it gets alone: tori fat and thin, turned any way,
 /// sheared in some, crowded so that rays start inside tubes and tori
 /// overlap balls and each other, exact copies of some (their entries tie),
 /// camera and shadow packets (nearest and any hit), half the tiles'
 /// origins inside a fat torus's tube (threaded through them). Mutation
-/// caught: a torus's entry moved by eps / 2. (The rules for short spans,
+/// caught: a torus's entry moved by eps / 2, a torus node's too. (The rules for short spans,
 /// later spans and where the answer stops being exact are margins no case
 /// here needs: dropped one by one, every answer stays the same.) The walks
 /// must settle a quarter of the lanes and leave some for the test to mean
@@ -708,10 +709,30 @@ fn packets_find_first_entries_of_unions_with_tori() {
             let mut kids = Vec::with_capacity(n + 8);
             for _ in 0..n {
                 let c = rp(&mut rng, 2.0);
-                let s = match rng.gen_range(0..5) {
+                // (Leaves only in half the cases: a union of leaves walks its
+                // unsettled lanes in order; one with nodes leaves them to
+                // their own evaluations.)
+                let s = match rng.gen_range(0..if case % 2 == 0 { 4 } else { 7 }) {
                     0 => Shape::Sphere { c, r: rng.gen_range(0.03..0.3) },
                     1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.4)) },
-                    _ => ring_torus(&mut rng, c, (0.05..0.4, 0.05..0.9)),
+                    2 | 3 => ring_torus(&mut rng, c, (0.05..0.4, 0.05..0.9)),
+                    // A node of a torus and kernel leaves (an arch, a ring
+                    // with a bite out of it, a ring on a ball).
+                    _ => {
+                        let t = ring_torus(&mut rng, c, (0.05..0.4, 0.05..0.9));
+                        let cut = match rng.gen_range(0..3) {
+                            0 => Shape::Plane { n: (DVec3::Y + rp(&mut rng, 1.0)).normalize(), d: c.y + rng.gen_range(-0.1..0.1) },
+                            1 => Shape::Sphere { c: c + rp(&mut rng, 0.3), r: rng.gen_range(0.05..0.3) },
+                            _ => Shape::Box { min: c - rp(&mut rng, 0.3).abs(), max: c + rp(&mut rng, 0.3).abs() },
+                        };
+                        // (A union with a half-space would leave the wide
+                        // union unbounded: no packet walks it.)
+                        match rng.gen_range(0..4) {
+                            0 if !matches!(cut, Shape::Plane { .. }) => Shape::Union(vec![t, cut]),
+                            1 => Shape::Diff(vec![t, cut]),
+                            _ => Shape::Inter(vec![t, cut]),
+                        }
+                    }
                 };
                 let s = sometimes_sheared(&mut rng, s);
                 kids.push(if rng.gen_bool(0.05) { kids.last().cloned().unwrap_or(s) } else { s });
@@ -747,11 +768,13 @@ fn packets_find_first_entries_of_unions_with_tori() {
     }
     let c = rothray::csg::take_eval_counts();
     println!(
-        "{rays} rays, {hits} hits ({inside} leaving a solid); wide-union lanes settled by first entries {}, walked in order {}",
-        c.first_settled, c.first_walked
+        "{rays} rays, {hits} hits ({inside} leaving a solid); wide-union lanes settled by first entries {}, walked in order {}, \
+         union evaluations not answered by the packet {}",
+        c.first_settled, c.first_walked, c.packet_misses
     );
     assert!(hits > rays / 4 && inside > rays / 10, "too few hits, or rays starting inside, to test");
-    assert!(c.first_settled > rays / 4 && c.first_walked > rays / 20, "too few lanes settled or walked to test");
+    assert!(c.first_settled > rays / 4, "too few lanes settled to test");
+    assert!(c.first_walked > rays / 50 && c.packet_misses > rays / 50, "too few lanes left to their walks or evaluations to test");
 }
 
 /// A small object: a kernel leaf (sheared in some), a torus, or a union,

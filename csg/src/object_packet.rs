@@ -133,7 +133,7 @@ impl Program {
     /// ([`LeafTable::has_torus_prep`]), at least one a torus (a node
     /// [`PacketMemo::first_surfaces8`] answers with each lane's torus spans
     /// from the packet's preps)?
-    fn torus_node(&self, leaves: &LeafTable, nu: usize) -> bool {
+    pub(crate) fn torus_node(&self, leaves: &LeafTable, nu: usize) -> bool {
         let kids = &self.children[self.first[nu] as usize..][..self.count[nu] as usize];
         let leaf = |c: &u32| self.first[*c as usize];
         kids.iter().all(|c| leaves.has_kernel8(leaf(c)) || leaves.has_torus_prep(leaf(c)))
@@ -226,6 +226,24 @@ impl PacketMemo {
     /// 60% of benches/scenes/tori's instructions flat.
     #[inline(never)]
     fn torus_node_firsts(&self, prog: &Program, leaves: &LeafTable, nu: usize, lanes: u32, ray: LaneRanges, out: &mut Firsts8) -> bool {
+        let Some((ops, tori)) = self.torus_node_ops::<false>(prog, leaves, nu) else { return false };
+        let done = lanes & ops.done & self.packet_lanes();
+        firsts_of(done, lanes, ray, out, |k| self.torus_node_first(leaves, &ops, tori, k, (ray.tmin[k], ray.eps[k])));
+        true
+    }
+
+    /// The operands of leafy node `nu` ([`Program::torus_node`]) with the
+    /// packet's solves of its kernel leaves (`BESIDE`: with the miss
+    /// pretests, see [`LeafTable::ranges8_beside`]), and the bits of its
+    /// tori (whose lanes' spans [`PacketMemo::torus_node_first`] asks);
+    /// `None` when the packet solves no leaves.
+    #[inline(always)]
+    pub(crate) fn torus_node_ops<const BESIDE: bool>(
+        &self,
+        prog: &Program,
+        leaves: &LeafTable,
+        nu: usize,
+    ) -> Option<(SmallOps<OBJECT_OPS>, u32)> {
         let mut ops = SmallOps::<OBJECT_OPS>::of(prog, nu);
         let first = prog.first[nu] as usize;
         let mut tori = 0u32;
@@ -233,7 +251,7 @@ impl PacketMemo {
             let leaf = prog.first[prog.children[first + j] as usize];
             ops.leaf[j] = leaf;
             if leaves.has_kernel8(leaf) {
-                let Some(r) = self.with_solve::<false, _>(leaves, leaf, |r| *r) else { return false };
+                let r = self.with_solve::<BESIDE, _>(leaves, leaf, |r| *r)?;
                 ops.done &= r.done;
                 ops.r[j] = r;
             } else {
@@ -242,9 +260,7 @@ impl PacketMemo {
                 ops.r[j] = Ranges8 { done: u32::MAX, hit: 0, ..Ranges8::default() };
             }
         }
-        let done = lanes & ops.done & self.packet_lanes();
-        firsts_of(done, lanes, ray, out, |k| self.torus_node_first(leaves, &ops, tori, k, (ray.tmin[k], ray.eps[k])));
-        true
+        Some((ops, tori))
     }
 
     /// Lane `k`'s first span of the node of `ops` whose operands `tori`
@@ -257,7 +273,14 @@ impl PacketMemo {
     /// the whole spans asked at once, benches/scenes/tori traced 9% slower
     /// than lane by lane. `Inside` (unsure) for a lane outside the preps.
     #[inline(always)]
-    fn torus_node_first(&self, leaves: &LeafTable, ops: &SmallOps<OBJECT_OPS>, tori: u32, k: usize, (lo, eps): (f32, f32)) -> SmallFirst {
+    pub(crate) fn torus_node_first(
+        &self,
+        leaves: &LeafTable,
+        ops: &SmallOps<OBJECT_OPS>,
+        tori: u32,
+        k: usize,
+        (lo, eps): (f32, f32),
+    ) -> SmallFirst {
         // (As `small_first`, by the kernel operands' misses.)
         if ops.missed_on(k, tori) {
             return SmallFirst::Empty;
