@@ -677,14 +677,15 @@ fn first_entries_of_unions(seed0: u64, deep: bool) {
 
 /// Packets of a tile find the first entries of wide unions whose children
 /// are ring tori among kernel leaves (`FirstWalk::take_torus`: each lane's
-/// nearest query of a torus from the packet's preps) and nodes of a torus
-/// and a kernel leaf (`FirstWalk::take_torus_node`), and every ray still
+/// nearest query of a torus from the packet's preps), nodes of a torus
+/// and a kernel leaf (`FirstWalk::take_torus_node`) and trees with tori
+/// (`FirstWalk::take_torus_tree`), and every ray still
 /// gets exactly what it gets alone: tori fat and thin, turned any way,
 /// sheared in some, crowded so that rays start inside tubes and tori
 /// overlap balls and each other, exact copies of some (their entries tie),
 /// camera and shadow packets (nearest and any hit), half the tiles'
 /// origins inside a fat torus's tube (threaded through them). Mutation
-/// caught: a torus's entry moved by eps / 2, a torus node's too. (The rules for short spans,
+/// caught: a torus's entry moved by eps / 2, a torus node's and a torus tree's too. (The rules for short spans,
 /// later spans and where the answer stops being exact are margins no case
 /// here needs: dropped one by one, every answer stays the same.) The walks
 /// must settle a quarter of the lanes and leave some for the test to mean
@@ -712,10 +713,12 @@ fn packets_find_first_entries_of_unions_with_tori() {
                 // (Leaves only in half the cases: a union of leaves walks its
                 // unsettled lanes in order; one with nodes leaves them to
                 // their own evaluations.)
-                let s = match rng.gen_range(0..if case % 2 == 0 { 4 } else { 7 }) {
+                let s = match rng.gen_range(0..if case % 2 == 0 { 4 } else { 8 }) {
                     0 => Shape::Sphere { c, r: rng.gen_range(0.03..0.3) },
                     1 => Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.4)) },
                     2 | 3 => ring_torus(&mut rng, c, (0.05..0.4, 0.05..0.9)),
+                    // A tree of two levels with tori (`FirstWalk::take_torus_tree`).
+                    7 => translated(torus_tree_object(&mut rng, 0.1), c),
                     // A node of a torus and kernel leaves (an arch, a ring
                     // with a bite out of it, a ring on a ball).
                     _ => {
@@ -913,6 +916,46 @@ fn packets_pick_hits_among_torus_nodes() {
     let (rays, hits, shadows, c) = pick_hits(0x70d3, torus_node_object);
     assert!(hits > rays / 5 && shadows > rays / 5, "too few hits to test");
     assert!(c.object_settled > rays / 2 && c.object_left > rays / 100, "too few lanes settled among the objects, or left, to test");
+}
+
+/// Tiles of objects that are small trees of several levels with ring tori
+/// among their leaves answer their packets' lanes by one sweep of each
+/// lane's boundaries by the tree's truth table (`torus_sweep.rs`), and
+/// every ray still gets exactly what it gets alone, nearest and any hit:
+/// unions, intersections and differences of torus nodes, kernel leaves and
+/// tori (some over eight leaves: lane by lane), crowded, sheared in some.
+/// It found a tree of up to six leaves with a torus made with no sets of
+/// its leaves inside it (`TreeShape::of`): every lane found it empty.
+#[test]
+fn packets_pick_hits_among_torus_trees() {
+    let (rays, hits, shadows, c) = pick_hits(0x70e5, torus_tree_object);
+    assert!(hits > rays / 5 && shadows > rays / 5, "too few hits to test");
+    assert!(c.object_settled > rays / 2 && c.object_left > rays / 100, "too few lanes settled among the objects, or left, to test");
+}
+
+/// A tree of two or three levels: a union, intersection or difference of
+/// torus nodes ([`torus_node_object`]), kernel leaves and tori, at a random
+/// place.
+fn torus_tree_object(rng: &mut SmallRng, spread: f64) -> Shape {
+    let c = rp(rng, spread);
+    let mut ops = vec![torus_node_object(rng, 0.15)];
+    for _ in 1..rng.gen_range(2..=3) {
+        ops.push(match rng.gen_range(0..4) {
+            0 => torus_node_object(rng, 0.15),
+            1 => {
+                let at = rp(rng, 0.2);
+                ring_torus(rng, at, (0.1..0.5, 0.1..0.9))
+            }
+            2 => Shape::Sphere { c: rp(rng, 0.3), r: rng.gen_range(0.05..0.4) },
+            _ => Shape::Box { min: -DVec3::splat(rng.gen_range(0.02..0.4)), max: DVec3::splat(rng.gen_range(0.02..0.4)) },
+        });
+    }
+    let s = match rng.gen_range(0..3) {
+        0 => Shape::Union(ops),
+        1 => Shape::Inter(ops),
+        _ => Shape::Diff(ops),
+    };
+    translated(s, c)
 }
 
 /// A small tree of several levels: unions, intersections and differences

@@ -19,10 +19,10 @@
 
 use rothray_primitives::{glam::Vec4, kernels8::Ranges8, LeafTable, Span, SpanSink, Surf};
 
-use super::small_first::{lane_events, small_first, sweep, SmallFirst, SmallOps};
+use super::small_first::{small_first, SmallFirst, SmallOps};
+use super::torus_sweep::TorusOperands;
 use super::tree_first::{done_by, TreeShape};
 use super::tree_first8::{tree_first8, LaneStarts};
-use super::{cand_key, cand_of_key};
 use super::{NodeKind, PacketMemo, Program};
 
 /// The most operands of an object's root that [`PacketMemo::first_surfaces8`]
@@ -125,7 +125,7 @@ impl Program {
             _ if self.leafy[nu] => {
                 self.wide[nu] == u32::MAX && self.count[nu] as usize <= OBJECT_OPS && (self.small[nu] != 0 || self.torus_node(leaves, nu))
             }
-            _ => self.is_small_tree(nu),
+            _ => self.is_small_tree(nu) || self.is_torus_tree(leaves, nu),
         }
     }
 
@@ -133,6 +133,7 @@ impl Program {
     /// ([`LeafTable::has_torus_prep`]), at least one a torus (a node
     /// [`PacketMemo::first_surfaces8`] answers with each lane's torus spans
     /// from the packet's preps)?
+    #[inline(always)]
     pub(crate) fn torus_node(&self, leaves: &LeafTable, nu: usize) -> bool {
         let kids = &self.children[self.first[nu] as usize..][..self.count[nu] as usize];
         let leaf = |c: &u32| self.first[*c as usize];
@@ -162,6 +163,14 @@ impl PacketMemo {
         if prog.kind[nu] == NodeKind::Leaf {
             let leaf = prog.first[nu];
             return self.with_solve::<false, _>(leaves, leaf, |r| leaf_firsts(r, leaf, lanes, ray, out)).is_some();
+        }
+        if !prog.leafy[nu] && !prog.is_small_tree(nu) {
+            // A tree with tori (`Program::is_torus_tree`).
+            let Some(tt) = self.torus_tree::<false>(prog, leaves, nu) else { return false };
+            let done = lanes & tt.done & self.packet_lanes();
+            let ops = tt.operands();
+            firsts_of(done, lanes, ray, out, |k| ops.first(self, leaves, k, (ray.tmin[k], ray.eps[k])));
+            return true;
         }
         if !prog.leafy[nu] {
             let Some(t) = TreeShape::of(prog, nu) else { return false };
@@ -228,14 +237,15 @@ impl PacketMemo {
     fn torus_node_firsts(&self, prog: &Program, leaves: &LeafTable, nu: usize, lanes: u32, ray: LaneRanges, out: &mut Firsts8) -> bool {
         let Some((ops, tori)) = self.torus_node_ops::<false>(prog, leaves, nu) else { return false };
         let done = lanes & ops.done & self.packet_lanes();
-        firsts_of(done, lanes, ray, out, |k| self.torus_node_first(leaves, &ops, tori, k, (ray.tmin[k], ray.eps[k])));
+        let node = torus_operands(&ops, tori);
+        firsts_of(done, lanes, ray, out, |k| node.first(self, leaves, k, (ray.tmin[k], ray.eps[k])));
         true
     }
 
     /// The operands of leafy node `nu` ([`Program::torus_node`]) with the
     /// packet's solves of its kernel leaves (`BESIDE`: with the miss
     /// pretests, see [`LeafTable::ranges8_beside`]), and the bits of its
-    /// tori (whose lanes' spans [`PacketMemo::torus_node_first`] asks);
+    /// tori (whose lanes' spans [`torus_operands`]' sweeps ask);
     /// `None` when the packet solves no leaves.
     #[inline(always)]
     pub(crate) fn torus_node_ops<const BESIDE: bool>(
@@ -262,114 +272,31 @@ impl PacketMemo {
         }
         Some((ops, tori))
     }
-
-    /// Lane `k`'s first span of the node of `ops` whose operands `tori`
-    /// (bits) are ring tori, on the range from `lo` (see
-    /// [`PacketMemo::torus_node_firsts`]): first from the tori's nearest
-    /// queries (their first spans, exact up to where each says), then,
-    /// when the node's first entry does not lie before that, from their
-    /// whole spans (the scalar evaluation's two steps: the nearest queries
-    /// polish one root of a torus a line meets, the whole ones all). With
-    /// the whole spans asked at once, benches/scenes/tori traced 9% slower
-    /// than lane by lane. `Inside` (unsure) for a lane outside the preps.
-    #[inline(always)]
-    pub(crate) fn torus_node_first(
-        &self,
-        leaves: &LeafTable,
-        ops: &SmallOps<OBJECT_OPS>,
-        tori: u32,
-        k: usize,
-        (lo, eps): (f32, f32),
-    ) -> SmallFirst {
-        // (As `small_first`, by the kernel operands' misses.)
-        if ops.missed_on(k, tori) {
-            return SmallFirst::Empty;
-        }
-        match self.torus_node_sweep(leaves, (ops, tori), k, (lo, eps), true) {
-            Some(f) => f,
-            None => self.torus_node_sweep(leaves, (ops, tori), k, (lo, eps), false).unwrap_or(SmallFirst::Inside),
-        }
-    }
-
-    /// The sweep of [`PacketMemo::torus_node_first`] with the tori's
-    /// nearest queries (`first_only`) or their whole spans: `None` when
-    /// the node's first entry is not known before the place the tori's
-    /// answers are exact to (the boundaries past it are left out, and a
-    /// stand-in boundary there, of no operand, makes the sweep's gap test
-    /// keep `2 eps` from it).
-    #[inline(always)]
-    fn torus_node_sweep(
-        &self,
-        leaves: &LeafTable,
-        (ops, tori): (&SmallOps<OBJECT_OPS>, u32),
-        k: usize,
-        (lo, eps): (f32, f32),
-        first_only: bool,
-    ) -> Option<SmallFirst> {
-        let near = lo - 2.0 * eps;
-        let mut ev = [0u64; TORUS_NODE_EVENTS];
-        let (mut n, mut inside) = lane_events((ops.count, |j| &ops.r[j]), k, near, &mut ev);
-        let mut known = f32::INFINITY;
-        let mut t = tori;
-        while t != 0 {
-            let j = t.trailing_zeros() as usize;
-            t &= t - 1;
-            let mut spans = TorusSpans::default();
-            let Some(v) = self.torus_lane(leaves, ops.leaf[j], k, ((near, f32::INFINITY), first_only), &mut spans) else {
-                return Some(SmallFirst::Inside);
-            };
-            // Roth's early outs, as the lane's evaluation takes them: an
-            // intersection with an empty operand, a difference with an
-            // empty positive one.
-            let gate = ops.kind == NodeKind::Intersection || (ops.kind == NodeKind::Difference && j == 0);
-            if spans.n == 0 && v == f32::INFINITY && gate {
-                return Some(SmallFirst::Empty);
-            }
-            if n + 2 * spans.n + 1 > TORUS_NODE_EVENTS {
-                return Some(SmallFirst::Inside); // (more boundaries than room: unsure)
-            }
-            known = known.min(v);
-            for s in &spans.s[..spans.n] {
-                // A span cut at `near` (or from minus infinity) starts before it.
-                if s.s0.is_real() {
-                    ev[n] = cand_key((2 * j) as u32, s.t0);
-                    n += 1;
-                } else {
-                    inside |= 1 << j;
-                }
-                // (An exit at infinity, as a half-space's: see `sweep`.)
-                ev[n] = cand_key((2 * j) as u32 | 1, if s.s1.is_real() { s.t1 } else { f32::INFINITY });
-                n += 1;
-            }
-        }
-        if known < f32::INFINITY {
-            let mut m = 0;
-            for i in 0..n {
-                if cand_of_key(ev[i]).1 <= known {
-                    ev[m] = ev[i];
-                    m += 1;
-                }
-            }
-            // The stand-in: operand 31, outside every set `member` reads.
-            ev[m] = cand_key(2 * 31, known);
-            n = m + 1;
-        }
-        // (A torus's boundaries are all its one surface.)
-        let node_surf = ops.node_surf();
-        let surf = |(j, exit): (usize, bool)| {
-            node_surf(j, if tori & (1 << j) != 0 { Surf::new(ops.leaf[j], 0) } else { ops.lane_surf(k, (j, exit)) })
-        };
-        let f = sweep(&mut ev[..n], inside, (lo, eps), ops.member(), surf);
-        // (No entry before `known` says nothing of the line past it.)
-        (known == f32::INFINITY || f != SmallFirst::Empty).then_some(f)
-    }
 }
 
-/// Room for a lane's boundaries in [`PacketMemo::torus_node_first`]: the
-/// kernel leaves' two each and the tori's spans', and a stand-in (a lane
-/// with more is unsure; at 49, room for every case, zeroing the array was
-/// a `memset` per lane).
-const TORUS_NODE_EVENTS: usize = 16;
+/// What a lane's sweep reads of the node of `ops` whose operands `tori`
+/// (bits) are ring tori ([`TorusOperands::first`], from the kernel leaves'
+/// solves and the tori's queries: `torus_sweep.rs`). (With the tori's whole
+/// spans asked at once, not first their nearest queries,
+/// benches/scenes/tori traced 9% slower than lane by lane.)
+#[inline(always)]
+pub(crate) fn torus_operands(ops: &SmallOps<OBJECT_OPS>, tori: u32) -> TorusOperands<'_, impl Fn(u32) -> bool, impl Fn(u32) -> bool> {
+    let count = ops.count;
+    let all = (1u32 << count) - 1;
+    let kind = ops.kind;
+    TorusOperands::new(
+        (&ops.leaf[..count], &ops.r[..count], tori),
+        ops.member(),
+        // Roth's early outs: an intersection with an empty operand, a
+        // difference with an empty positive one (a union: all empty).
+        move |missed: u32| match kind {
+            NodeKind::Intersection => missed != 0,
+            NodeKind::Difference => missed & 1 != 0,
+            _ => missed == all,
+        },
+        if kind == NodeKind::Difference { all & !1 } else { 0 },
+    )
+}
 
 /// A lane's spans of a torus (at most three on a line).
 pub(crate) struct TorusSpans {

@@ -1444,6 +1444,8 @@ mod small_first8;
 #[path = "small_tree.rs"]
 pub(crate) mod small_tree;
 use small_tree::SmallLists;
+#[path = "torus_sweep.rs"]
+mod torus_sweep;
 #[path = "tree_first.rs"]
 pub(crate) mod tree_first;
 #[path = "tree_first8.rs"]

@@ -116,6 +116,11 @@ impl TreeShape {
             (t.count, t.flip) = (0, 0);
         }
         t.table = t.pattern::<4>(prog, n, false)?;
+        // (A tree of up to six leaves not all kernel leaves, `small` 0:
+        // its sets of them, as above.)
+        if t.count <= PERIODIC {
+            t.low = t.table[0] & low_sets(t.count);
+        }
         Some(t)
     }
 

@@ -25,9 +25,10 @@
 //! A ring torus among the children has no 8-lane solve: each lane reads
 //! its nearest query from the packet's preps, the answer its own walk reads
 //! (`FirstWalk::take_torus`); a child node of kernel leaves and tori is
-//! swept as an object of that node is (`FirstWalk::take_torus_node`). Any
-//! other child without a packet path (a sweep, a mesh, a larger tree with
-//! a torus) stops the walk: every lane walks in order.
+//! swept as an object of that node is (`FirstWalk::take_torus_node`), and
+//! a small tree of them by its truth table (`FirstWalk::take_torus_tree`).
+//! Any other child without a packet path (a sweep, a mesh, a larger tree)
+//! stops the walk: every lane walks in order.
 //!
 //! A wide union of small trees ([`Program::is_meet_union`]: a forest of
 //! trees cut by half-spaces, of rounded or hollowed pieces) is walked the
@@ -56,7 +57,7 @@ use rothray_primitives::{
     Aabb, LeafTable, Span, Surf,
 };
 
-use super::object_packet::{TorusSpans, OBJECT_OPS};
+use super::object_packet::{torus_operands, TorusSpans, OBJECT_OPS};
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
 use super::tree_first::{done_by, solved_late, tree_first, TreeShape, TREE_LEAVES};
@@ -385,6 +386,7 @@ impl FirstWalk<'_> {
                 // (Of several levels, or one of more operands than `take_small`'s.)
                 _ if self.prog.is_tree(c) => self.take_tree(pos, c, m, &tbox),
                 _ if self.is_torus_node(c) => self.take_torus_node(c, m, &tbox),
+                _ if self.prog.is_torus_tree(self.leaves, c) => self.take_torus_tree(c, m, &tbox),
                 _ => {
                     self.stop();
                     break;
@@ -472,7 +474,7 @@ impl FirstWalk<'_> {
     /// Takes child `c`, a node of kernel leaves and ring tori
     /// ([`FirstWalk::is_torus_node`]), for the lanes `m` whose box entries
     /// are `tbox`: each lane's first span as an object of that node gets it
-    /// ([`PacketMemo::torus_node_first`]: swept as [`small_first`] sweeps,
+    /// (`torus_sweep.rs`: swept as [`small_first`] sweeps,
     /// from the kernel leaves' solves and each lane's nearest queries of
     /// the tori), taken as a small tree's. A lane outside the packet's
     /// solves is left to its walk. Why: such a child stopped the walk for
@@ -488,11 +490,37 @@ impl FirstWalk<'_> {
         let mut lanes = m & ops.done & memo.packet_lanes();
         // A lane that a solve left undone goes the walk's way.
         self.live &= !(m & !lanes);
+        let node = torus_operands(&ops, tori);
         while lanes != 0 {
             let k = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             counts::wide_child();
-            let first = memo.torus_node_first(leaves, &ops, tori, k, (self.tmin[k], self.eps[k]));
+            let first = node.first(memo, leaves, k, (self.tmin[k], self.eps[k]));
+            self.take_first(k, first, tbox);
+        }
+    }
+
+    /// Takes child `c`, a tree of several levels of kernel leaves and ring
+    /// tori ([`Program::is_torus_tree`]), for the lanes `m` whose box
+    /// entries are `tbox`: each lane's first span swept by the tree's truth
+    /// table (`torus_sweep.rs`), taken as a small tree's. A lane outside
+    /// the packet's solves is left to its walk.
+    #[inline(never)]
+    fn take_torus_tree(&mut self, c: usize, m: u32, tbox: &[f32; 8]) {
+        let (memo, leaves) = (self.memo, self.leaves);
+        let Some(tt) = memo.torus_tree::<true>(self.prog, leaves, c) else {
+            self.live &= !m;
+            return;
+        };
+        let mut lanes = m & tt.done & memo.packet_lanes();
+        // A lane that a solve left undone goes the walk's way.
+        self.live &= !(m & !lanes);
+        let ops = tt.operands();
+        while lanes != 0 {
+            let k = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            counts::wide_child();
+            let first = ops.first(memo, leaves, k, (self.tmin[k], self.eps[k]));
             self.take_first(k, first, tbox);
         }
     }
