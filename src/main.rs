@@ -586,6 +586,8 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "masked_tries_left": st.eval.masked_left,
         "full_redos": st.eval.full_redos,
         "parallel_mesh_lanes": st.eval.parallel_mesh_lanes,
+        "mesh_walk_lanes": st.eval.mesh_walk_lanes,
+        "mesh_walk_left": st.eval.mesh_walk_left,
         "parallel_mesh_left": st.eval.parallel_mesh_left,
     })
 }

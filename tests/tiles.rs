@@ -780,6 +780,76 @@ fn packets_find_first_entries_of_unions_with_tori() {
     assert!(c.first_walked > rays / 50 && c.packet_misses > rays / 50, "too few lanes left to their walks or evaluations to test");
 }
 
+/// Packets of camera rays (one origin) in scenes of more mesh leaves than
+/// the packet path walks ahead (`PACKET_MESHES`) walk each mesh once for
+/// all lanes when the first lane asks (`PacketMemo::walk_meshes_for`), and
+/// every ray still gets exactly what it gets alone: octahedron meshes of
+/// one to 128 faces as objects, in a union of them, cut by balls, cutting
+/// balls (subtracted: full spans, not walked), under the winding rule in
+/// some, crowded so that rays start inside them, with a ground plane and
+/// balls. Mutation caught: a served span's entry moved by 1e-4.
+#[test]
+fn packets_walk_many_meshes_together() {
+    let (mut rays, mut hits) = (0u64, 0u64);
+    let _ = rothray::csg::take_eval_counts();
+    for seed in 0x6e50..0x6e50 + 12u64 {
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..4 {
+            let mesh = |rng: &mut SmallRng| {
+                let (c, r, levels) = (rp(rng, 1.2), rng.gen_range(0.2..0.8), rng.gen_range(0..4));
+                if rng.gen_bool(0.2) {
+                    octa_mesh_winding(c, r, levels)
+                } else {
+                    octa_mesh(c, r, levels)
+                }
+            };
+            let ball = |rng: &mut SmallRng| Shape::Sphere { c: rp(rng, 1.2), r: rng.gen_range(0.1..0.6) };
+            let mut trees = Vec::new();
+            for _ in 0..rng.gen_range(6..12) {
+                trees.push(match rng.gen_range(0..5) {
+                    0 => Shape::Union((0..rng.gen_range(2..4)).map(|_| mesh(&mut rng)).collect()),
+                    1 => Shape::Diff(vec![mesh(&mut rng), ball(&mut rng)]),
+                    2 => Shape::Diff(vec![ball(&mut rng), mesh(&mut rng)]),
+                    3 => Shape::Inter(vec![mesh(&mut rng), ball(&mut rng)]),
+                    _ => mesh(&mut rng),
+                });
+            }
+            trees.push(ball(&mut rng));
+            if rng.gen_bool(0.5) {
+                trees.push(Shape::Plane { n: DVec3::new(0.0, 1.0, 0.0) + rp(&mut rng, 0.2), d: -1.5 });
+            }
+            let scene = bake(&trees);
+            remove_mesh_files(&trees);
+            let mut ps = PacketScratch::default();
+            let mut ts = TileScratch::default();
+            for t in 0..16 {
+                let (o, d) = random_ray(&mut rng);
+                let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
+                let half = if t % 2 == 0 { (0.15, 0.1) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
+                let (packet, region) = camera_packet(&mut rng, o, d, half);
+                let (out, blocked) = trace_tile(&scene, (&mut ps, &mut ts), &packet, &region);
+                for k in 0..8 {
+                    assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
+                    let one = scene.intersect(&packet[k]);
+                    hits += one.is_some() as u64;
+                    assert_eq!(
+                        key(out[k]),
+                        key(one),
+                        "seed {seed:#x} case {case} tile {t} ray {k}: {:?} trees {:?}",
+                        packet[k],
+                        trees.iter().map(|t| t.json()).collect::<Vec<_>>()
+                    );
+                    rays += 1;
+                }
+            }
+        }
+    }
+    let c = rothray::csg::take_eval_counts();
+    println!("{rays} rays, {hits} hits; mesh queries answered by the packets' walks {}, left {}", c.mesh_walk_lanes, c.mesh_walk_left);
+    assert!(hits > rays / 4, "too few hits to test");
+    assert!(c.mesh_walk_lanes > rays / 2 && c.mesh_walk_left > 0, "too few mesh queries answered by walks, or left, to test");
+}
+
 /// A small object: a kernel leaf (sheared in some), a torus, or a union,
 /// intersection or difference of two to six of them (bounded first
 /// operand), some operands near twins of another.

@@ -24,6 +24,8 @@ thread_local! {
     static FULL_REDOS: Cell<u64> = const { Cell::new(0) };
     static PAR_MESH: Cell<u64> = const { Cell::new(0) };
     static PAR_MESH_LEFT: Cell<u64> = const { Cell::new(0) };
+    static MESH_WALK: Cell<u64> = const { Cell::new(0) };
+    static MESH_WALK_LEFT: Cell<u64> = const { Cell::new(0) };
 }
 
 /// What the evaluator did on this thread since the last [`take_eval_counts`].
@@ -81,6 +83,13 @@ pub struct EvalCounts {
     /// Lanes of those packets left to their own mesh queries (the point at
     /// `tmin` outside the mesh's bounds, the winding rule).
     pub parallel_mesh_left: u64,
+    /// Nearest-mode mesh queries of lanes of packets from one origin
+    /// answered by the packet's walk of the mesh made when the first lane
+    /// asked (`PacketMemo::walk_meshes_for`).
+    pub mesh_walk_lanes: u64,
+    /// Those left to the lane's own query (a lane the walk did not do, a
+    /// range its record does not cover).
+    pub mesh_walk_left: u64,
 }
 
 impl EvalCounts {
@@ -104,6 +113,8 @@ impl EvalCounts {
         self.full_redos += o.full_redos;
         self.parallel_mesh_lanes += o.parallel_mesh_lanes;
         self.parallel_mesh_left += o.parallel_mesh_left;
+        self.mesh_walk_lanes += o.mesh_walk_lanes;
+        self.mesh_walk_left += o.mesh_walk_left;
     }
 }
 
@@ -201,6 +212,13 @@ pub fn parallel_mesh_lanes(done: u32, left: u32) {
     PAR_MESH_LEFT.with(|x| x.set(x.get() + left as u64));
 }
 
+/// A lane's nearest-mode mesh query asked of its packet's walk: answered
+/// from it or not.
+#[inline(always)]
+pub(crate) fn mesh_walk_lane(answered: bool) {
+    bump(if answered { &MESH_WALK } else { &MESH_WALK_LEFT })
+}
+
 /// This thread's counts since the last call, reset.
 pub fn take_eval_counts() -> EvalCounts {
     EvalCounts {
@@ -222,5 +240,7 @@ pub fn take_eval_counts() -> EvalCounts {
         full_redos: FULL_REDOS.with(|c| c.replace(0)),
         parallel_mesh_lanes: PAR_MESH.with(|c| c.replace(0)),
         parallel_mesh_left: PAR_MESH_LEFT.with(|c| c.replace(0)),
+        mesh_walk_lanes: MESH_WALK.with(|c| c.replace(0)),
+        mesh_walk_left: MESH_WALK_LEFT.with(|c| c.replace(0)),
     }
 }

@@ -192,6 +192,8 @@ pub struct PacketMemo {
     unions: std::cell::RefCell<union_packet::UnionRecords>,
     /// Analytic leaves solved for the packet, on demand (see `leaf_packet.rs`).
     leaf_solves: std::cell::RefCell<leaf_packet::LeafRecords>,
+    /// Mesh leaves walked for the packet, on demand (see `mesh_packet.rs`).
+    meshes: std::cell::RefCell<mesh_packet::MeshWalks>,
 }
 
 /// One leaf's (or one wide union's) record.
@@ -214,6 +216,7 @@ impl PacketMemo {
         self.len = 0;
         self.unions.get_mut().clear();
         self.leaf_solves.get_mut().clear();
+        self.meshes.get_mut().clear();
     }
 
     /// Records leaf `leaf` queried on `[tmin[k], tmax[k]]` per lane: `fill` pushes
@@ -263,17 +266,23 @@ impl PacketMemo {
     /// when the recorded query covers that range (`None`: ask the leaf).
     #[inline]
     fn serve<S: SpanSink + ?Sized>(&self, k: usize, leaf: u32, lo: f32, hi: f32, out: &mut S) -> Option<f32> {
-        let e = self.entry(leaf)?;
-        let v = e.valid[k];
-        if e.done & (1 << k) == 0 || !(lo >= e.tmin[k] && hi <= e.tmax[k] && lo <= v) {
-            return None;
-        }
-        let end = hi.min(v);
-        for s in &e.spans[k] {
-            push_clipped(out, *s, lo, end);
-        }
-        Some(if v >= hi { f32::INFINITY } else { v })
+        serve_record(self.entry(leaf)?, k, (lo, hi), out)
     }
+}
+
+/// Lane `k`'s spans from record `e` on `[lo, hi]`, appended to `out`, and
+/// where they stop being exact, when its query covers that range.
+#[inline]
+pub(crate) fn serve_record<S: SpanSink + ?Sized>(e: &MemoLeaf, k: usize, (lo, hi): (f32, f32), out: &mut S) -> Option<f32> {
+    let v = e.valid[k];
+    if e.done & (1 << k) == 0 || !(lo >= e.tmin[k] && hi <= e.tmax[k] && lo <= v) {
+        return None;
+    }
+    let end = hi.min(v);
+    for s in &e.spans[k] {
+        push_clipped(out, *s, lo, end);
+    }
+    Some(if v >= hi { f32::INFINITY } else { v })
 }
 
 /// The eight lanes' records of one leaf in a [`PacketMemo`].
@@ -346,9 +355,16 @@ fn leaf_query<S: SpanSink + ?Sized>(
             if let Some(v) = memo.torus_lane(leaves, i, k, ((lo, hi), nearest.is_some()), out) {
                 return v;
             }
-        } else if nearest.is_some() && memo.len > 0 {
-            if let Some(v) = memo.serve(k, i, lo, hi, out) {
-                return v;
+        } else if let Some(slack) = nearest {
+            if memo.len > 0 {
+                if let Some(v) = memo.serve(k, i, lo, hi, out) {
+                    return v;
+                }
+            }
+            if leaves.is_mesh(i) {
+                if let Some(v) = memo.mesh_lane(leaves, i, (k, (lo, hi)), slack, out) {
+                    return v;
+                }
             }
         }
     }
@@ -1435,6 +1451,8 @@ mod lane_ends;
 mod leaf_packet;
 #[path = "masked.rs"]
 mod masked;
+#[path = "mesh_packet.rs"]
+mod mesh_packet;
 #[path = "object_packet.rs"]
 pub mod object_packet;
 #[path = "small_first.rs"]

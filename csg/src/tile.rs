@@ -92,6 +92,8 @@ pub struct TileProgram {
     counts: TileCounts,
     /// See [`TileProgram::kernels8`].
     kernels8: bool,
+    /// See [`TileProgram::meshes`].
+    meshes: bool,
     /// Is `prog.ray_plane` the current tile's (made when a list first needs it)?
     plane_set: bool,
 }
@@ -103,6 +105,7 @@ impl TileProgram {
     pub fn begin(&mut self, base: &Program) {
         self.base.follow(&mut self.prog, base, &mut self.follow_counts);
         self.kernels8 = false;
+        self.meshes = false;
         self.plane_set = false;
     }
 
@@ -118,6 +121,13 @@ impl TileProgram {
     /// were not looked at)?
     pub fn kernels8(&self) -> bool {
         self.kernels8
+    }
+
+    /// May a mesh leaf have been kept since [`TileProgram::begin`] (one
+    /// was, or a node was kept whole in a scene with meshes)? Then a
+    /// packet's rays may walk meshes together (`PacketMemo::walk_meshes_for`).
+    pub fn meshes(&self) -> bool {
+        self.meshes
     }
 
     /// The counts so far, reset.
@@ -167,10 +177,12 @@ impl Spec<'_> {
         if kind == NodeKind::Leaf {
             self.tp.counts.leaves_kept += 1;
             self.tp.kernels8 |= self.leaves.has_kernel8(b.first[nu]) || self.leaves.has_torus_prep(b.first[nu]);
+            self.tp.meshes |= self.leaves.is_mesh(b.first[nu]);
             return Some(n);
         }
         if depth >= MAX_DEPTH {
             self.tp.kernels8 = true;
+            self.tp.meshes |= !self.leaves.meshes.is_empty();
             return Some(n);
         }
         let (first, count) = (b.first[nu] as usize, b.count[nu] as usize);
@@ -227,6 +239,7 @@ impl Spec<'_> {
         self.tp.counts.wide_queries += 1;
         // (Its children are not looked at one by one.)
         self.tp.kernels8 = true;
+        self.tp.meshes |= !self.leaves.meshes.is_empty();
         let kind = b.kind[nu];
         let skip = (kind == NodeKind::Difference) as u32;
         let first = b.first[nu] as usize;

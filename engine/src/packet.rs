@@ -9,6 +9,7 @@ use glam::Vec3;
 use rothray_csg::{MemoLanes, NodeKind, PacketMemo, Program, RayCtx, Scratch};
 use rothray_primitives::{
     box_wide::BoxTest8,
+    mask8::fill_lanes,
     mesh::{NearestRays8, NO_THROUGH},
     Aabb, LeafTable, Span, Surf,
 };
@@ -230,9 +231,10 @@ fn containing_leaves(program: &Program, n: u32, out: &mut Vec<u32>) {
 }
 
 /// Do the rays of `tile` (of the whole scene without one) share work in a
-/// packet: does it keep a leaf with a packet kernel, or a wide union?
+/// packet: does it keep a leaf with a packet kernel, a wide union, or a
+/// mesh?
 fn shares_work(tile: Option<&TileView>) -> bool {
-    tile.is_none_or(|t| t.kernels8 || t.unions)
+    tile.is_none_or(|t| t.kernels8 || t.unions || t.meshes)
 }
 
 /// Are all eight `rays` plain ([`Ray::is_plain`])? Each lane's answer
@@ -248,8 +250,9 @@ fn solves_leaves(tile: Option<&TileView>) -> bool {
 }
 
 /// Readies `memo` for a packet of eight plain rays (`ctx`, no memo yet) of
-/// `tile`: its wide unions walked and its analytic leaves solved for all
-/// lanes when the first lane asks.
+/// `tile`: its wide unions walked, its analytic leaves solved and (rays
+/// from one origin) its meshes walked for all lanes when the first lane
+/// asks.
 fn ready_memo(memo: &mut PacketMemo, (rays, eps): (&[Ray; 8], &[f32; 8]), tile: Option<&TileView>) {
     memo.clear();
     if tile.is_some_and(|t| t.unions) {
@@ -257,6 +260,15 @@ fn ready_memo(memo: &mut PacketMemo, (rays, eps): (&[Ray; 8], &[f32; 8]), tile: 
     }
     if solves_leaves(tile) {
         memo.solve_leaves_for(|k| (rays[k].origin, rays[k].dir), 0xff);
+    }
+    let o = rays[0].origin;
+    if tile.is_some_and(|t| t.meshes) && rays.iter().all(|r| r.origin == o) {
+        let (mut d, mut tmin, mut tmax, mut slack) = ([Vec3::ZERO; 8], [0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
+        fill_lanes(&mut d, |k| rays[k].dir);
+        fill_lanes(&mut tmin, |k| rays[k].tmin);
+        fill_lanes(&mut tmax, |k| rays[k].tmax);
+        fill_lanes(&mut slack, |k| RayCtx::nearest_slack_of(eps[k]));
+        memo.walk_meshes_for((o, &d), (&tmin, &tmax), &slack);
     }
 }
 

@@ -133,6 +133,8 @@ pub struct TileView<'a> {
     pub(crate) unions: bool,
     /// Has the tile leaves with packet kernels (`LeafTable::ranges8`)?
     pub(crate) kernels8: bool,
+    /// May it have mesh leaves (`TileProgram::meshes`)?
+    pub(crate) meshes: bool,
     /// Are all its objects' roots answered by `PacketMemo::first_surfaces8`
     /// (see `TileScratch`)?
     pub(crate) simple: bool,
@@ -163,6 +165,7 @@ impl TileScratch {
             bounded: self.listed.then_some(&self.boxes),
             unions: self.unions,
             kernels8: self.tp.kernels8(),
+            meshes: self.tp.meshes(),
             simple: self.simple,
         }
     }
