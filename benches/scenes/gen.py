@@ -684,10 +684,83 @@ def capsules3000():
     return capsule_field("capsules3000", 3000, 301, (300 / 3000) ** (1 / 3))
 
 
+def forest_tori():
+    """scenes/forest (the example) with every trunk (a cylinder) made a
+    ring torus lying around its foot: a wide union of balls, cones and
+    tori. Not in the suite: `gen.py --out DIR forest_tori`."""
+    def ring(t):
+        if "cylinder" not in t:
+            return t
+        a, r = t["cylinder"]["a"], t["cylinder"]["radius"]
+        return torus([a[0], a[1] + r, a[2]], [0, 1, 0], 2.0 * r, 0.6 * r)
+    return forest_with("forest_tori", ring)
+
+
+def forest_arches():
+    """scenes/forest (the example) with every trunk made an arch, a ring
+    torus standing upright cut by the ground's half-space: a wide union
+    whose children are nodes of a torus and a half-space. Not in the
+    suite: `gen.py --out DIR forest_arches`."""
+    def arch(t):
+        if "cylinder" not in t:
+            return t
+        a, r = t["cylinder"]["a"], t["cylinder"]["radius"]
+        return I(torus(a, [0, 0, 1], 2.0 * r, 0.6 * r), plane([0, -1, 0], -a[1]))
+    return forest_with("forest_arches", arch)
+
+
+def tori_deep():
+    """400 objects, each a tree two levels deep with a ring torus: a ring
+    cut by a half-space minus a ball, or a ring cut by a box joined to a
+    ball; on a ground box. Not in the suite: `gen.py --out DIR tori_deep`."""
+    rng = random.Random(11)
+    objs = [obj("ground", box([-12, -1.2, -12], [12, -1, 12]), [0.6, 0.6, 0.6])]
+    for i in range(400):
+        c = [rng.uniform(-10, 10), rng.uniform(-0.6, 0.6), rng.uniform(-10, 6)]
+        ax = [rng.uniform(-1, 1), 1, rng.uniform(-1, 1)]
+        R = rng.uniform(0.2, 0.5)
+        r = R * rng.uniform(0.15, 0.4)
+        t = torus(c, ax, R, r)
+        if i % 2 == 0:
+            s = D(I(t, plane([0, -1, 0], -c[1])), sphere([c[0] + R, c[1], c[2]], r * 1.5))
+        else:
+            s = U(I(t, box([c[0] - R, c[1] - R, c[2] - R], [c[0] + R, c[1] + 0.3 * R, c[2] + R])),
+                  sphere(c, r * 2))
+        objs.append(obj("ring%d" % i, s, hsv(i / 400)))
+    return scene("tori_deep", [0, 4, 14], [0, 0, 0], 50, objs)
+
+
+def knob_union():
+    """60 knob meshes (knob.obj, 1 280 triangles), turned and scaled, in
+    one union: more mesh leaves than the packet path walks ahead. Not in
+    the suite: `gen.py --out DIR knob_union` (copies knob.obj to DIR)."""
+    rng = random.Random(4)
+    kids = [X(mesh("knob.obj"), translate=[rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)],
+              rotate=[rng.uniform(0, 360), rng.uniform(0, 360), 0], scale=rng.uniform(0.5, 0.9))
+            for _ in range(60)]
+    return scene("knob_union", [0, 0, 10], [0, 0, -1], 40, [obj("knobs", U(*kids), [0.7, 0.6, 0.9])])
+
+
+def knob_cut_field():
+    """60 objects, each a knob mesh (turned and scaled) minus a ball. Not
+    in the suite: `gen.py --out DIR knob_cut_field` (copies knob.obj to
+    DIR)."""
+    rng = random.Random(5)
+    objs = []
+    for i in range(60):
+        c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)]
+        k = X(mesh("knob.obj"), translate=c, rotate=[rng.uniform(0, 360), rng.uniform(0, 360), 0],
+              scale=rng.uniform(0.5, 0.9))
+        objs.append(obj("k%d" % i, D(k, sphere([c[0] + 0.3, c[1] + 0.3, c[2] + 0.3], 0.35)), hsv(rng.random())))
+    return scene("knob_cut_field", [0, 0, 10], [0, 0, -1], 40, objs)
+
+
 # Scenes made on request only (`--out DIR NAME`), for measurements outside
 # the suite.
 EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000,
-                                 forest_deep4, forest4)}
+                                 forest_deep4, forest4, forest_tori,
+                                 forest_arches, tori_deep, knob_union,
+                                 knob_cut_field)}
 
 
 def main(argv):
@@ -699,6 +772,11 @@ def main(argv):
         knob_obj(os.path.join(HERE, "knob.obj"))
     for n in names:
         sc = {**SCENES, **EXTRA}[n]()
+        if n.startswith("knob_") and out_dir != HERE:
+            # (Its mesh beside it: a scene reads files in its own folder.)
+            knob = os.path.join(out_dir, "knob.obj")
+            if not os.path.exists(knob):
+                knob_obj(knob)
         nl = sum(leaves(o["shape"]) for o in sc["objects"])
         dp = max(depth(o["shape"]) for o in sc["objects"])
         path = os.path.join(out_dir, n + ".json")
