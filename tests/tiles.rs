@@ -780,23 +780,30 @@ fn packets_find_first_entries_of_unions_with_tori() {
     assert!(c.first_walked > rays / 50 && c.packet_misses > rays / 50, "too few lanes left to their walks or evaluations to test");
 }
 
-/// Packets of camera rays (one origin) in scenes of more mesh leaves than
-/// the packet path walks ahead (`PACKET_MESHES`) walk each mesh once for
-/// all lanes when the first lane asks (`PacketMemo::walk_meshes_for`), and
-/// every ray still gets exactly what it gets alone: octahedron meshes of
+/// Packets of camera rays (one origin) and of shadow rays (one direction)
+/// in scenes of more mesh leaves than the packet path walks ahead
+/// (`PACKET_MESHES`) walk each mesh once for all lanes when the first lane
+/// asks (`PacketMemo::walk_meshes_for`, `walk_meshes_parallel_for`), and
+/// every ray still gets exactly what it gets alone, nearest and any hit: octahedron meshes of
 /// one to 128 faces as objects, in a union of them, cut by balls, cutting
 /// balls (subtracted: full spans, not walked), under the winding rule in
 /// some, crowded so that rays start inside them, with a ground plane and
-/// balls. Mutation caught: a served span's entry moved by 1e-4.
+/// balls, shadow packets starting around a mesh's centre. Mutations
+/// caught: a served span's entry moved by 1e-4 (camera packets), a
+/// parallel walk's spans dropped (shadow packets).
 #[test]
 fn packets_walk_many_meshes_together() {
-    let (mut rays, mut hits) = (0u64, 0u64);
+    let (mut rays, mut hits, mut shadows) = (0u64, 0u64, 0u64);
     let _ = rothray::csg::take_eval_counts();
     for seed in 0x6e50..0x6e50 + 12u64 {
         let mut rng = SmallRng::seed_from_u64(seed);
         for case in 0..4 {
+            // (The meshes' centres: shadow packets start around them, inside
+            // their bounds, where a parallel walk takes the lanes.)
+            let centres = std::cell::RefCell::new(Vec::new());
             let mesh = |rng: &mut SmallRng| {
                 let (c, r, levels) = (rp(rng, 1.2), rng.gen_range(0.2..0.8), rng.gen_range(0..4));
+                centres.borrow_mut().push(c);
                 if rng.gen_bool(0.2) {
                     octa_mesh_winding(c, r, levels)
                 } else {
@@ -826,10 +833,16 @@ fn packets_walk_many_meshes_together() {
                 let (o, d) = random_ray(&mut rng);
                 let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
                 let half = if t % 2 == 0 { (0.15, 0.1) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
-                let (packet, region) = camera_packet(&mut rng, o, d, half);
+                let (packet, region) = if t % 4 == 3 {
+                    let cs = centres.borrow();
+                    shadow_packet(&mut rng, cs[t % cs.len()].as_vec3().as_dvec3(), d)
+                } else {
+                    camera_packet(&mut rng, o, d, half)
+                };
                 let (out, blocked) = trace_tile(&scene, (&mut ps, &mut ts), &packet, &region);
                 for k in 0..8 {
                     assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
+                    shadows += blocked[k] as u64;
                     let one = scene.intersect(&packet[k]);
                     hits += one.is_some() as u64;
                     assert_eq!(
@@ -845,9 +858,13 @@ fn packets_walk_many_meshes_together() {
         }
     }
     let c = rothray::csg::take_eval_counts();
-    println!("{rays} rays, {hits} hits; mesh queries answered by the packets' walks {}, left {}", c.mesh_walk_lanes, c.mesh_walk_left);
-    assert!(hits > rays / 4, "too few hits to test");
+    println!(
+        "{rays} rays, {hits} hits, {shadows} blocked; mesh queries answered by the packets' walks {}, left {}; lanes of parallel walks {}, left {}",
+        c.mesh_walk_lanes, c.mesh_walk_left, c.parallel_mesh_lanes, c.parallel_mesh_left
+    );
+    assert!(hits > rays / 4 && shadows > rays / 4, "too few hits to test");
     assert!(c.mesh_walk_lanes > rays / 2 && c.mesh_walk_left > 0, "too few mesh queries answered by walks, or left, to test");
+    assert!(c.parallel_mesh_lanes > rays / 20, "too few shadow lanes walked in parallel to test");
 }
 
 /// A small object: a kernel leaf (sheared in some), a torus, or a union,

@@ -5,6 +5,12 @@
 //! every lane that asks is served from the record ([`serve_record`]), as
 //! the meshes the packet path walks ahead are.
 //!
+//! A packet of eight rays with one direction and their own origins (a
+//! tile's shadow rays toward a directional light) walks a mesh once
+//! instead ([`LeafTable::mesh_parallel8`]): the lanes whose own query walks
+//! the mesh to its box exit get their whole spans, exact everywhere, as
+//! the walked-ahead meshes' shadow packets get them.
+//!
 //! Why: only scenes of at most `PACKET_MESHES` (4) mesh leaves in all had
 //! their meshes walked in packets (walked ahead, for every packet); with
 //! more, every ray walked every mesh alone (60 knobs in a union: 52% of the
@@ -23,7 +29,11 @@ use super::{serve_record, MemoLeaf, PacketMemo};
 pub(crate) struct MeshWalks {
     /// The lanes taking part (0: no packet, nothing is walked).
     lanes: u32,
+    /// Rays with one direction `d[0]` and the origins `os` (shadow rays),
+    /// not rays from one origin `o`.
+    parallel: bool,
     o: Vec3,
+    os: [Vec3; 8],
     d: [Vec3; 8],
     tmin: [f32; 8],
     tmax: [f32; 8],
@@ -43,16 +53,22 @@ impl MeshWalks {
     /// Walks mesh leaf `i` for the lanes into a new record; returns its place.
     #[inline(never)]
     fn walk(&mut self, leaves: &LeafTable, i: u32) -> usize {
-        let MeshWalks { lanes, o, d, tmin, tmax, slack, recs, len } = self;
+        let MeshWalks { lanes, parallel, o, os, d, tmin, tmax, slack, recs, len } = self;
         if recs.len() == *len {
             recs.push(MemoLeaf::default());
         }
-        let q = NearestRays8 { o: *o, d, tmin, tmax, slack, through: &NO_THROUGH, exact: None };
         let e = &mut recs[*len];
         for v in e.spans.iter_mut() {
             v.clear();
         }
-        let (done, valid) = leaves.mesh_nearest8(i, &q, *lanes, &mut e.spans);
+        let (done, valid) = if *parallel {
+            let done = leaves.mesh_parallel8(i, (os, d[0]), (tmin, tmax), *lanes, &mut e.spans);
+            crate::counts::parallel_mesh_lanes(done.count_ones(), 8 - done.count_ones());
+            (done, [f32::INFINITY; 8])
+        } else {
+            let q = NearestRays8 { o: *o, d, tmin, tmax, slack, through: &NO_THROUGH, exact: None };
+            leaves.mesh_nearest8(i, &q, *lanes, &mut e.spans)
+        };
         (e.leaf, e.done, e.tmin, e.tmax, e.valid) = (i, done, *tmin, *tmax, valid);
         *len += 1;
         *len - 1
@@ -67,7 +83,16 @@ impl PacketMemo {
     /// all of them.
     pub fn walk_meshes_for(&mut self, (o, d): (Vec3, &[Vec3; 8]), (tmin, tmax): (&[f32; 8], &[f32; 8]), slack: &[f32; 8]) {
         let w = self.meshes.get_mut();
-        (w.lanes, w.o, w.d, w.tmin, w.tmax, w.slack, w.len) = (0xff, o, *d, *tmin, *tmax, *slack, 0);
+        (w.lanes, w.parallel, w.o, w.d, w.tmin, w.tmax, w.slack, w.len) = (0xff, false, o, *d, *tmin, *tmax, *slack, 0);
+    }
+
+    /// Lets the lanes of a packet of eight rays with one direction `d` from
+    /// the origins `o` on `[tmin[k], tmax[k]]` (each finite and plain) have
+    /// their mesh leaves walked together, each lane's whole spans (see the
+    /// module's notes).
+    pub fn walk_meshes_parallel_for(&mut self, (o, d): (&[Vec3; 8], Vec3), (tmin, tmax): (&[f32; 8], &[f32; 8])) {
+        let w = self.meshes.get_mut();
+        (w.lanes, w.parallel, w.os, w.d[0], w.tmin, w.tmax, w.len) = (0xff, true, *o, d, *tmin, *tmax, 0);
     }
 
     /// Lane `k`'s nearest-mode spans (slack `slack`) of mesh leaf `i` on
@@ -86,7 +111,8 @@ impl PacketMemo {
         out: &mut S,
     ) -> Option<f32> {
         let mut w = self.meshes.borrow_mut();
-        if w.lanes & (1 << k) == 0 || w.slack[k].to_bits() != slack.to_bits() {
+        // (Whole spans answer a nearest query of any slack.)
+        if w.lanes & (1 << k) == 0 || !(w.parallel || w.slack[k].to_bits() == slack.to_bits()) {
             return None;
         }
         let at = match w.recs[..w.len].iter().position(|e| e.leaf == i) {

@@ -579,6 +579,14 @@ impl RenderScene {
             ready_memo(&mut ps.memo, (rays, &eps), tile);
             if parallel {
                 self.walk_meshes_parallel(rays, &mut ps.memo);
+            } else if tile.is_some_and(|t| t.meshes) && rays.iter().all(|r| dir_bits(r) == dir_bits(&rays[0])) {
+                // More meshes than are walked ahead: each walked when a
+                // lane first asks (`PacketMemo::walk_meshes_parallel_for`).
+                let (mut o, mut tmin, mut tmax) = ([Vec3::ZERO; 8], [0.0f32; 8], [0.0f32; 8]);
+                fill_lanes(&mut o, |k| rays[k].origin);
+                fill_lanes(&mut tmin, |k| rays[k].tmin);
+                fill_lanes(&mut tmax, |k| rays[k].tmax);
+                ps.memo.walk_meshes_parallel_for((&o, rays[0].dir), (&tmin, &tmax));
             }
             let settled = self.packet_any(&PacketRays { rays, eps: &eps, memo: &ps.memo }, tile, (&mut ps.met, &mut ps.scratch), out);
             if settled == 0xff {
