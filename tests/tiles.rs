@@ -404,6 +404,29 @@ fn trace_tile(
     (out, blocked)
 }
 
+/// Traces `packet` in a tile of `region` and checks every lane against its
+/// ray alone, any hit and nearest (`what()` names the case in a failure);
+/// returns the lanes that hit something, those blocked, and those whose
+/// hit leaves a solid (the ray started inside it).
+fn check_packet(
+    scene: &rothray::engine::RenderScene,
+    scratch: (&mut PacketScratch, &mut TileScratch),
+    (packet, region): (&[Ray], &Frustum),
+    what: &dyn Fn() -> String,
+) -> (u64, u64, u64) {
+    let (out, blocked) = trace_tile(scene, scratch, packet, region);
+    let (mut hits, mut shadows, mut inside) = (0, 0, 0);
+    for k in 0..packet.len() {
+        assert_eq!(blocked[k], scene.occluded(&packet[k]), "{} ray {k}: any-hit", what());
+        shadows += blocked[k] as u64;
+        let one = scene.intersect(&packet[k]);
+        hits += one.is_some() as u64;
+        inside += one.is_some_and(|h| h.normal.dot(packet[k].dir) > 0.0) as u64;
+        assert_eq!(key(out[k]), key(one), "{} ray {k}: {:?}", what(), packet[k]);
+    }
+    (hits, shadows, inside)
+}
+
 /// Packets of a tile walk its wide unions of leaves together, and every
 /// ray still gets exactly (bit for bit) what it gets alone: camera packets
 /// (one origin) and packets of parallel rays from a box of origins (a
@@ -756,16 +779,9 @@ fn packets_find_first_entries_of_unions_with_tori() {
             for (t, &(o, d)) in tiles.iter().enumerate() {
                 let half = if t % 4 < 2 { (0.15, 0.1) } else { (rng.gen_range(0.005..0.05), rng.gen_range(0.005..0.05)) };
                 let (packet, region) = if t % 8 >= 6 { shadow_packet(&mut rng, o, d) } else { camera_packet(&mut rng, o, d, half) };
-                let (out, blocked) = trace_tile(&scene, (&mut ps, &mut ts), &packet, &region);
-                for k in 0..8 {
-                    assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
-                    let one = scene.intersect(&packet[k]);
-                    hits += one.is_some() as u64;
-                    // (A hit leaving a solid: the ray started inside one.)
-                    inside += one.is_some_and(|h| h.normal.dot(packet[k].dir) > 0.0) as u64;
-                    assert_eq!(key(out[k]), key(one), "seed {seed:#x} case {case} tile {t} ray {k}: {:?}", packet[k]);
-                    rays += 1;
-                }
+                let what = || format!("seed {seed:#x} case {case} tile {t}");
+                let (h, _, i) = check_packet(&scene, (&mut ps, &mut ts), (&packet, &region), &what);
+                (hits, inside, rays) = (hits + h, inside + i, rays + 8);
             }
         }
     }
@@ -839,21 +855,9 @@ fn packets_walk_many_meshes_together() {
                 } else {
                     camera_packet(&mut rng, o, d, half)
                 };
-                let (out, blocked) = trace_tile(&scene, (&mut ps, &mut ts), &packet, &region);
-                for k in 0..8 {
-                    assert_eq!(blocked[k], scene.occluded(&packet[k]), "seed {seed:#x} case {case} tile {t} ray {k}: any-hit");
-                    shadows += blocked[k] as u64;
-                    let one = scene.intersect(&packet[k]);
-                    hits += one.is_some() as u64;
-                    assert_eq!(
-                        key(out[k]),
-                        key(one),
-                        "seed {seed:#x} case {case} tile {t} ray {k}: {:?} trees {:?}",
-                        packet[k],
-                        trees.iter().map(|t| t.json()).collect::<Vec<_>>()
-                    );
-                    rays += 1;
-                }
+                let what = || format!("seed {seed:#x} case {case} tile {t} trees {:?}", trees.iter().map(|t| t.json()).collect::<Vec<_>>());
+                let (h, b, _) = check_packet(&scene, (&mut ps, &mut ts), (&packet, &region), &what);
+                (hits, shadows, rays) = (hits + h, shadows + b, rays + 8);
             }
         }
     }
