@@ -487,16 +487,24 @@ impl FirstWalk<'_> {
             self.live &= !m;
             return;
         };
-        let mut lanes = m & ops.done & memo.packet_lanes();
-        // A lane that a solve left undone goes the walk's way.
-        self.live &= !(m & !lanes);
         let node = torus_operands(&ops, tori);
+        self.take_swept((m, ops.done), tbox, |k, lo_eps| node.first(memo, leaves, k, lo_eps));
+    }
+
+    /// Takes the lanes of `m` that the solves `done` did, each with its
+    /// first span `first(k, (tmin, eps))` of a child whose box entries are
+    /// `tbox`; the others (and those outside the packet's solves) go the
+    /// walk's way.
+    #[inline(always)]
+    fn take_swept(&mut self, (m, done): (u32, u32), tbox: &[f32; 8], first: impl Fn(usize, (f32, f32)) -> SmallFirst) {
+        let mut lanes = m & done & self.memo.packet_lanes();
+        self.live &= !(m & !lanes);
         while lanes != 0 {
             let k = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             counts::wide_child();
-            let first = node.first(memo, leaves, k, (self.tmin[k], self.eps[k]));
-            self.take_first(k, first, tbox);
+            let f = first(k, (self.tmin[k], self.eps[k]));
+            self.take_first(k, f, tbox);
         }
     }
 
@@ -512,17 +520,8 @@ impl FirstWalk<'_> {
             self.live &= !m;
             return;
         };
-        let mut lanes = m & tt.done & memo.packet_lanes();
-        // A lane that a solve left undone goes the walk's way.
-        self.live &= !(m & !lanes);
         let ops = tt.operands();
-        while lanes != 0 {
-            let k = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
-            counts::wide_child();
-            let first = ops.first(memo, leaves, k, (self.tmin[k], self.eps[k]));
-            self.take_first(k, first, tbox);
-        }
+        self.take_swept((m, tt.done), tbox, |k, lo_eps| ops.first(memo, leaves, k, lo_eps));
     }
 
     /// Takes child `c`, an intersection or difference of a few kernel
