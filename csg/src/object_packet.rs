@@ -17,10 +17,10 @@
 //! lane's visit of its candidates and its per-object evaluations were a
 //! third of the cycles (perf, `nearest_ctx` and `object_first`).
 
-use rothray_primitives::{glam::Vec4, kernels8::Ranges8, LeafTable, Span, SpanSink, Surf};
+use rothray_primitives::{glam::Vec4, kernels8::Ranges8, LeafTable, Surf};
 
 use super::small_first::{small_first, SmallFirst, SmallOps};
-use super::torus_sweep::TorusOperands;
+use super::torus_sweep::torus_operands;
 use super::tree_first::{done_by, TreeShape};
 use super::tree_first8::{tree_first8, LaneStarts};
 use super::{NodeKind, PacketMemo, Program};
@@ -123,22 +123,10 @@ impl Program {
         match self.kind[nu] {
             NodeKind::Leaf => leaves.has_kernel8(self.first[nu]),
             _ if self.leafy[nu] => {
-                self.wide[nu] == u32::MAX && self.count[nu] as usize <= OBJECT_OPS && (self.small[nu] != 0 || self.torus_node(leaves, nu))
+                (self.wide[nu] == u32::MAX && self.count[nu] as usize <= OBJECT_OPS && self.small[nu] != 0) || self.torus_node(leaves, nu)
             }
             _ => self.is_small_tree(nu) || self.is_torus_tree(leaves, nu),
         }
-    }
-
-    /// Are the operands of leafy node `nu` kernel leaves and ring tori
-    /// ([`LeafTable::has_torus_prep`]), at least one a torus (a node
-    /// [`PacketMemo::first_surfaces8`] answers with each lane's torus spans
-    /// from the packet's preps)?
-    #[inline(always)]
-    pub(crate) fn torus_node(&self, leaves: &LeafTable, nu: usize) -> bool {
-        let kids = &self.children[self.first[nu] as usize..][..self.count[nu] as usize];
-        let leaf = |c: &u32| self.first[*c as usize];
-        kids.iter().all(|c| leaves.has_kernel8(leaf(c)) || leaves.has_torus_prep(leaf(c)))
-            && kids.iter().any(|c| leaves.has_torus_prep(leaf(c)))
     }
 }
 
@@ -240,84 +228,6 @@ impl PacketMemo {
         let node = torus_operands(&ops, tori);
         firsts_of(done, lanes, ray, out, |k| node.first(self, leaves, k, (ray.tmin[k], ray.eps[k])));
         true
-    }
-
-    /// The operands of leafy node `nu` ([`Program::torus_node`]) with the
-    /// packet's solves of its kernel leaves (`BESIDE`: with the miss
-    /// pretests, see [`LeafTable::ranges8_beside`]), and the bits of its
-    /// tori (whose lanes' spans [`torus_operands`]' sweeps ask);
-    /// `None` when the packet solves no leaves.
-    #[inline(always)]
-    pub(crate) fn torus_node_ops<const BESIDE: bool>(
-        &self,
-        prog: &Program,
-        leaves: &LeafTable,
-        nu: usize,
-    ) -> Option<(SmallOps<OBJECT_OPS>, u32)> {
-        let mut ops = SmallOps::<OBJECT_OPS>::of(prog, nu);
-        let first = prog.first[nu] as usize;
-        let mut tori = 0u32;
-        for j in 0..ops.count {
-            let leaf = prog.first[prog.children[first + j] as usize];
-            ops.leaf[j] = leaf;
-            if leaves.has_kernel8(leaf) {
-                let r = self.with_solve::<BESIDE, _>(leaves, leaf, |r| *r)?;
-                ops.done &= r.done;
-                ops.r[j] = r;
-            } else {
-                // (No lane's solve: its spans are asked below.)
-                tori |= 1 << j;
-                ops.r[j] = Ranges8 { done: u32::MAX, hit: 0, ..Ranges8::default() };
-            }
-        }
-        Some((ops, tori))
-    }
-}
-
-/// What a lane's sweep reads of the node of `ops` whose operands `tori`
-/// (bits) are ring tori ([`TorusOperands::first`], from the kernel leaves'
-/// solves and the tori's queries: `torus_sweep.rs`). (With the tori's whole
-/// spans asked at once, not first their nearest queries,
-/// benches/scenes/tori traced 9% slower than lane by lane.)
-#[inline(always)]
-pub(crate) fn torus_operands(ops: &SmallOps<OBJECT_OPS>, tori: u32) -> TorusOperands<'_, impl Fn(u32) -> bool, impl Fn(u32) -> bool> {
-    let count = ops.count;
-    let all = (1u32 << count) - 1;
-    let kind = ops.kind;
-    TorusOperands::new(
-        (&ops.leaf[..count], &ops.r[..count], tori),
-        ops.member(),
-        // Roth's early outs: an intersection with an empty operand, a
-        // difference with an empty positive one (a union: all empty).
-        move |missed: u32| match kind {
-            NodeKind::Intersection => missed != 0,
-            NodeKind::Difference => missed & 1 != 0,
-            _ => missed == all,
-        },
-        if kind == NodeKind::Difference { all & !1 } else { 0 },
-    )
-}
-
-/// A lane's spans of a torus (at most three on a line).
-pub(crate) struct TorusSpans {
-    pub(crate) s: [Span; 3],
-    pub(crate) n: usize,
-}
-
-impl Default for TorusSpans {
-    fn default() -> Self {
-        let none = Span { t0: 0.0, t1: 0.0, s0: Surf::NONE, s1: Surf::NONE };
-        TorusSpans { s: [none; 3], n: 0 }
-    }
-}
-
-impl SpanSink for TorusSpans {
-    fn push_span(&mut self, s: Span) {
-        // (A fourth is not made: `torus_query_prepped` gives three at most.)
-        if self.n < 3 {
-            self.s[self.n] = s;
-            self.n += 1;
-        }
     }
 }
 

@@ -57,9 +57,9 @@ use rothray_primitives::{
     Aabb, LeafTable, Span, Surf,
 };
 
-use super::object_packet::{torus_operands, TorusSpans, OBJECT_OPS};
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
+use super::torus_sweep::{torus_operands, TorusSpans};
 use super::tree_first::{done_by, solved_late, tree_first, TreeShape, TREE_LEAVES};
 use super::{cand_key, sort_few, NodeKind, PacketMemo, Program};
 use crate::counts;
@@ -385,7 +385,7 @@ impl FirstWalk<'_> {
                 _ if self.prog.small_leafy(c) => self.take_small(c, m, &tbox),
                 // (Of several levels, or one of more operands than `take_small`'s.)
                 _ if self.prog.is_tree(c) => self.take_tree(pos, c, m, &tbox),
-                _ if self.is_torus_node(c) => self.take_torus_node(c, m, &tbox),
+                _ if self.prog.torus_node(self.leaves, c) => self.take_torus_node(c, m, &tbox),
                 _ if self.prog.is_torus_tree(self.leaves, c) => self.take_torus_tree(c, m, &tbox),
                 _ => {
                     self.stop();
@@ -462,17 +462,9 @@ impl FirstWalk<'_> {
         }
     }
 
-    /// Is child `c` a narrow node of at most [`OBJECT_OPS`] operands, kernel
-    /// leaves and ring tori ([`Program::torus_node`]: a ring cut by a
-    /// half-space, a torus minus a ball)?
-    #[inline(always)]
-    fn is_torus_node(&self, c: usize) -> bool {
-        let p = self.prog;
-        p.leafy[c] && p.wide[c] == u32::MAX && p.count[c] as usize <= OBJECT_OPS && p.torus_node(self.leaves, c)
-    }
-
     /// Takes child `c`, a node of kernel leaves and ring tori
-    /// ([`FirstWalk::is_torus_node`]), for the lanes `m` whose box entries
+    /// ([`Program::torus_node`]: a ring cut by a half-space, a torus minus
+    /// a ball), for the lanes `m` whose box entries
     /// are `tbox`: each lane's first span as an object of that node gets it
     /// (`torus_sweep.rs`: swept as [`small_first`] sweeps,
     /// from the kernel leaves' solves and each lane's nearest queries of
