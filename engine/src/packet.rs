@@ -572,14 +572,15 @@ impl RenderScene {
         // packet meshes together.
         // (Bits, not values: -0 and +0 components would set up other walks.)
         let dir_bits = |r: &Ray| r.dir.to_array().map(f32::to_bits);
-        let parallel = n == 8 && !self.packet_meshes.is_empty() && rays.iter().all(|r| dir_bits(r) == dir_bits(&rays[0]));
+        let one_dir = || rays.iter().all(|r| dir_bits(r) == dir_bits(&rays[0]));
+        let parallel = n == 8 && !self.packet_meshes.is_empty() && one_dir();
         if n == 8 && !self.ray_by_ray && (shares_work(tile) || parallel) && all_plain(rays[..8].try_into().expect("eight rays")) {
             let rays: &[Ray; 8] = rays[..8].try_into().expect("eight rays");
             let eps = self.eps8(rays);
             ready_memo(&mut ps.memo, (rays, &eps), tile);
             if parallel {
                 self.walk_meshes_parallel(rays, &mut ps.memo);
-            } else if tile.is_some_and(|t| t.meshes) && rays.iter().all(|r| dir_bits(r) == dir_bits(&rays[0])) {
+            } else if tile.is_some_and(|t| t.meshes) && one_dir() {
                 // More meshes than are walked ahead: each walked when a
                 // lane first asks (`PacketMemo::walk_meshes_parallel_for`).
                 let (mut o, mut tmin, mut tmax) = ([Vec3::ZERO; 8], [0.0f32; 8], [0.0f32; 8]);
