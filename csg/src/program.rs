@@ -236,6 +236,31 @@ impl PacketMemo {
         }
     }
 
+    /// Lane `k`'s nearest-mode spans (slack `slack`) on `(lo, hi)` of leaf
+    /// `i`, which has neither an 8-lane kernel nor a torus prep (a mesh, a
+    /// sweep), appended to `out`, and where they stop being exact, from
+    /// the packet's records: the meshes walked ahead, else the mesh walks
+    /// made when a lane first asks; `None` when the packet does not answer.
+    #[inline(always)]
+    pub(crate) fn nearest_lane<S: SpanSink + ?Sized>(
+        &self,
+        leaves: &LeafTable,
+        i: u32,
+        (k, (lo, hi)): (usize, (f32, f32)),
+        slack: f32,
+        out: &mut S,
+    ) -> Option<f32> {
+        if self.len > 0 {
+            if let Some(v) = self.serve(k, i, lo, hi, out) {
+                return Some(v);
+            }
+        }
+        if leaves.is_mesh(i) {
+            return self.mesh_lane(leaves, i, (k, (lo, hi)), slack, out);
+        }
+        None
+    }
+
     /// The record of `leaf`, if it was added.
     #[inline]
     fn entry(&self, leaf: u32) -> Option<&MemoLeaf> {
@@ -356,15 +381,8 @@ fn leaf_query<S: SpanSink + ?Sized>(
                 return v;
             }
         } else if let Some(slack) = nearest {
-            if memo.len > 0 {
-                if let Some(v) = memo.serve(k, i, lo, hi, out) {
-                    return v;
-                }
-            }
-            if leaves.is_mesh(i) {
-                if let Some(v) = memo.mesh_lane(leaves, i, (k, (lo, hi)), slack, out) {
-                    return v;
-                }
+            if let Some(v) = memo.nearest_lane(leaves, i, (k, (lo, hi)), slack, out) {
+                return v;
             }
         }
     }

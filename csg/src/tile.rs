@@ -329,6 +329,16 @@ impl Spec<'_> {
                     self.tp.kids.truncate(at);
                     return Some(n);
                 }
+                if listing && met >= 2 && b.is_packet_union(n) && !self.narrow_is_packet_node(n, &self.tp.kids[at..]) {
+                    // Kept whole with a list for the same reason: a narrow
+                    // union of meshes (or sweeps) is no packet node, and
+                    // each lane collected the baked union's candidates
+                    // along its whole ray (60 knob meshes in a union: a
+                    // quarter of the instructions flat, callgrind 480x270).
+                    self.write_list(n, at + unbounded);
+                    self.tp.kids.truncate(at);
+                    return Some(n);
+                }
                 // A narrow union of the children met, in the tree's order
                 // (the order `combine` meets them in matters only for chains
                 // of near twins: see the module's notes).
@@ -372,6 +382,18 @@ impl Spec<'_> {
             pos.iter().map(|&p| b.small[b.children[first + p as usize] as usize]),
         );
         small != 0 && small as usize <= crate::program::tree_first::TREE_LEAVES
+    }
+
+    /// Would a narrow union of the children at positions `pos` of baked
+    /// leafy union `n` be a node packets answer ([`Program::packet_first_node`]:
+    /// its leaves kernel leaves, or ring tori among them)?
+    fn narrow_is_packet_node(&self, n: u32, pos: &[u32]) -> bool {
+        let b = self.base;
+        let first = b.first[n as usize] as usize;
+        pos.iter().all(|&p| {
+            let leaf = b.first[b.children[first + p as usize] as usize];
+            self.leaves.has_kernel8(leaf) || self.leaves.has_torus_prep(leaf)
+        })
     }
 
     /// Has the tile's region a ray plane (`prog.ray_plane`, made on first

@@ -27,8 +27,9 @@
 //! (`FirstWalk::take_torus`); a child node of kernel leaves and tori is
 //! swept as an object of that node is (`FirstWalk::take_torus_node`), and
 //! a small tree of them by its truth table (`FirstWalk::take_torus_tree`).
-//! Any other child without a packet path (a sweep, a mesh, a larger tree)
-//! stops the walk: every lane walks in order.
+//! A mesh child's lanes read their answers from the packet's walk of the
+//! mesh (`FirstWalk::take_mesh`). Any other child without a packet path (a
+//! sweep, a larger tree) stops the walk: every lane walks in order.
 //!
 //! A wide union of small trees ([`Program::is_meet_union`]: a forest of
 //! trees cut by half-spaces, of rounded or hollowed pieces) is walked the
@@ -54,14 +55,14 @@ use rothray_primitives::{
     box_wide::{Lanes8, Visit8},
     kernels8::{Ranges8, Rays8Soa},
     mask8::{le_mask, masked_max, masked_min},
-    Aabb, LeafTable, Span, Surf,
+    Aabb, LeafTable, Span, SpanSink, Surf,
 };
 
 use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
-use super::torus_sweep::{torus_operands, TorusSpans};
+use super::torus_sweep::torus_operands;
 use super::tree_first::{done_by, solved_late, tree_first, TreeShape, TREE_LEAVES};
-use super::{cand_key, sort_few, NodeKind, PacketMemo, Program};
+use super::{cand_key, sort_few, NodeKind, PacketMemo, Program, RayCtx};
 use crate::counts;
 
 /// Past the first entry `a`, the other children's boxes entered beyond
@@ -372,6 +373,10 @@ impl FirstWalk<'_> {
                             self.take_torus(leaf, m, &tbox);
                             continue;
                         }
+                        if self.leaves.is_mesh(leaf) {
+                            self.take_mesh(leaf, m, &tbox);
+                            continue;
+                        }
                         self.stop();
                         break;
                     }
@@ -417,20 +422,11 @@ impl FirstWalk<'_> {
     /// Takes child leaf `leaf`, a ring torus (no 8-lane solve), for the
     /// lanes `m` whose box entries are `tbox`: each lane's nearest query on
     /// its whole range from the packet's preps ([`PacketMemo::torus_lane`],
-    /// the answer its lane walk reads). Its first span counts only where
-    /// it starts on the range with a real entry and is longer than `8 eps`
-    /// (as a small tree's, [`FirstWalk::take_first`]): then its entry is
-    /// the one polished root a shorter range's query gives too, and a
-    /// settled lane's answer is that entry cut at `v` (its exit never
-    /// read). Later spans, a short first span, and the place the answer
-    /// stops being exact (the next span may start there) bound the second
-    /// start, so no lane settles where the torus might come first or fuse
-    /// (margins: a nearest query's later span, or its stop, lies past its
-    /// first span's exit).
-    /// A lane outside the preps, or starting inside the torus, is left to
-    /// its walk. Why: one torus among a union's children stopped the walk
-    /// for every lane (a forest whose trunks were rings: 4.0x POV-Ray's
-    /// speed flat, against 5.9x for the forest).
+    /// the answer its lane walk reads), taken by `take_answer`. A lane
+    /// outside the preps is left to its walk. Why: one torus among a
+    /// union's children stopped the walk for every lane (a forest whose
+    /// trunks were rings: 4.0x POV-Ray's speed flat, against 5.9x for the
+    /// forest).
     #[inline(never)]
     fn take_torus(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
         let mut m = m;
@@ -438,27 +434,89 @@ impl FirstWalk<'_> {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             counts::wide_child();
-            let (lo, hi, eps) = (self.tmin[k], self.tmax[k], self.eps[k]);
-            let mut spans = TorusSpans::default();
-            let Some(v) = self.memo.torus_lane(self.leaves, leaf, k, ((lo, hi), true), &mut spans) else {
+            let mut spans = FirstSpans::default();
+            let v = self.memo.torus_lane(self.leaves, leaf, k, ((self.tmin[k], self.tmax[k]), true), &mut spans);
+            self.take_answer(k, v, &spans, tbox[k]);
+        }
+    }
+
+    /// Takes child leaf `leaf`, a mesh, for the lanes `m` whose box entries
+    /// are `tbox`: each lane's nearest-mode answer on its whole range from
+    /// the packet's walk of the mesh ([`PacketMemo::nearest_lane`], the
+    /// record its lane walk is served from, clipped to its range). That
+    /// answer stops at `v_m`, `4 eps` past the mesh's first crossing
+    /// (`MeshData::spans_nearest`): its first span `[a_m, v_m]` is cut
+    /// there, where a lane's walk that takes it first is cut too
+    /// (`stop_at_first_entry`: the same `a + 4 eps`), so the mesh's
+    /// unknown rest past `v_m` bounds the second start only where `v_m`
+    /// comes earlier. Its later spans bound the second start; a lane
+    /// starting inside the mesh, or that the packet does not answer, is
+    /// left to its walk. (No `8 eps` rule as for a torus: a shorter
+    /// range's answer is the same record clipped; a short first span
+    /// settles no lane, `FirstWalk::finish`.) Why: a mesh among a union's
+    /// children stopped the walk for every lane (60 knob meshes in a
+    /// union: each lane walked the children in order, 4.5x POV-Ray's
+    /// speed flat).
+    #[inline(never)]
+    fn take_mesh(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
+        let mut m = m;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            counts::wide_child();
+            let mut spans = FirstSpans::default();
+            let eps = self.eps[k];
+            let range = (self.tmin[k], self.tmax[k]);
+            let Some(v) = self.memo.nearest_lane(self.leaves, leaf, (k, range), RayCtx::nearest_slack_of(eps), &mut spans) else {
                 self.live &= !(1 << k);
                 continue;
             };
-            self.second[k] = self.second[k].min(v);
-            let Some(first) = spans.s[..spans.n].first().copied() else { continue };
+            let Some(first) = spans.first else {
+                self.second[k] = self.second[k].min(v);
+                continue;
+            };
             if !first.s0.is_real() {
                 // Inside at the range's start.
                 self.live &= !(1 << k);
                 continue;
             }
-            for s in &spans.s[1..spans.n] {
-                self.second[k] = self.second[k].min(s.t0);
+            if v < (first.t0 + 4.0 * eps).max(first.t0.next_up()) {
+                self.second[k] = self.second[k].min(v);
             }
-            if first.t1 - first.t0 > 8.0 * eps {
-                self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox[k]);
-            } else {
-                self.second[k] = self.second[k].min(first.t0);
-            }
+            self.second[k] = self.second[k].min(spans.rest);
+            self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox[k]);
+        }
+    }
+
+    /// Takes lane `k`'s nearest-mode answer of a leaf child on its whole
+    /// range, exact up to `v` (`None`: the packet does not answer; the lane
+    /// is left to its walk), whose box entry is `tbox`. Its first span
+    /// counts only where it starts on the range with a real entry and is
+    /// longer than `8 eps` (as a small tree's, [`FirstWalk::take_first`]):
+    /// then its entry is the one a shorter range's query gives too, and a
+    /// settled lane's answer is that entry cut at `v` (its exit never
+    /// read). Later spans, a short first span (which the lane's walk may
+    /// ask again in full, `leaf_asks_again`), and the place the answer
+    /// stops being exact (the next span may start there) bound the second
+    /// start, so no lane settles where the leaf might come first or fuse
+    /// (margins: a nearest query's later span, or its stop, lies past its
+    /// first span's exit). A lane starting inside the leaf is left to its
+    /// walk.
+    #[inline(always)]
+    fn take_answer(&mut self, k: usize, v: Option<f32>, spans: &FirstSpans, tbox: f32) {
+        let Some(v) = v else {
+            self.live &= !(1 << k);
+            return;
+        };
+        self.second[k] = self.second[k].min(v).min(spans.rest);
+        let Some(first) = spans.first else { return };
+        if !first.s0.is_real() {
+            // Inside at the range's start.
+            self.live &= !(1 << k);
+        } else if first.t1 - first.t0 > 8.0 * self.eps[k] {
+            self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox);
+        } else {
+            self.second[k] = self.second[k].min(first.t0);
         }
     }
 
@@ -776,6 +834,31 @@ impl FirstWalk<'_> {
             self.reach[k] = self.reach[k].min(c0 + PRUNE * self.eps[k]);
         } else {
             self.second[k] = self.second[k].min(c0);
+        }
+    }
+}
+
+/// A leaf's first span on a lane's range and the smallest start of its
+/// later spans (`+inf` with none): all a union's first-entry walk reads of
+/// a torus's or a mesh's answer.
+struct FirstSpans {
+    first: Option<Span>,
+    rest: f32,
+}
+
+impl Default for FirstSpans {
+    fn default() -> Self {
+        FirstSpans { first: None, rest: f32::INFINITY }
+    }
+}
+
+impl SpanSink for FirstSpans {
+    #[inline(always)]
+    fn push_span(&mut self, s: Span) {
+        if self.first.is_none() {
+            self.first = Some(s);
+        } else {
+            self.rest = self.rest.min(s.t0);
         }
     }
 }
