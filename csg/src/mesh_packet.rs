@@ -8,8 +8,9 @@
 //! A packet of eight rays with one direction and their own origins (a
 //! tile's shadow rays toward a directional light) walks a mesh once
 //! instead ([`LeafTable::mesh_parallel8`]): the lanes whose own query walks
-//! the mesh to its box exit get their whole spans, exact everywhere, as
-//! the walked-ahead meshes' shadow packets get them.
+//! the mesh to its box exit get their whole spans, exact everywhere, and
+//! those starting outside the mesh's bounds their nearest queries' spans,
+//! as the walked-ahead meshes' shadow packets get them.
 //!
 //! Why: only scenes of at most `PACKET_MESHES` (4) mesh leaves in all had
 //! their meshes walked in packets (walked ahead, for every packet); with
@@ -62,9 +63,9 @@ impl MeshWalks {
             v.clear();
         }
         let (done, valid) = if *parallel {
-            let done = leaves.mesh_parallel8(i, (os, d[0]), (tmin, tmax), *lanes, &mut e.spans);
+            let (done, valid) = leaves.mesh_parallel8(i, (os, d[0]), (tmin, tmax, Some(slack)), *lanes, &mut e.spans);
             crate::counts::parallel_mesh_lanes(done.count_ones(), 8 - done.count_ones());
-            (done, [f32::INFINITY; 8])
+            (done, valid)
         } else {
             let q = NearestRays8 { o: *o, d, tmin, tmax, slack, through: &NO_THROUGH, exact: None };
             leaves.mesh_nearest8(i, &q, *lanes, &mut e.spans)
@@ -87,12 +88,12 @@ impl PacketMemo {
     }
 
     /// Lets the lanes of a packet of eight rays with one direction `d` from
-    /// the origins `o` on `[tmin[k], tmax[k]]` (each finite and plain) have
-    /// their mesh leaves walked together, each lane's whole spans (see the
-    /// module's notes).
-    pub fn walk_meshes_parallel_for(&mut self, (o, d): (&[Vec3; 8], Vec3), (tmin, tmax): (&[f32; 8], &[f32; 8])) {
+    /// the origins `o` on `[tmin[k], tmax[k]]` (each finite and plain) and
+    /// nearest-mode slacks `slack` have their mesh leaves walked together
+    /// (see the module's notes).
+    pub fn walk_meshes_parallel_for(&mut self, (o, d): (&[Vec3; 8], Vec3), (tmin, tmax): (&[f32; 8], &[f32; 8]), slack: &[f32; 8]) {
         let w = self.meshes.get_mut();
-        (w.lanes, w.parallel, w.os, w.d[0], w.tmin, w.tmax, w.len) = (0xff, true, *o, d, *tmin, *tmax, 0);
+        (w.lanes, w.parallel, w.os, w.d[0], w.tmin, w.tmax, w.slack, w.len) = (0xff, true, *o, d, *tmin, *tmax, *slack, 0);
     }
 
     /// Lane `k`'s nearest-mode spans (slack `slack`) of mesh leaf `i` on
@@ -111,8 +112,7 @@ impl PacketMemo {
         out: &mut S,
     ) -> Option<f32> {
         let mut w = self.meshes.borrow_mut();
-        // (Whole spans answer a nearest query of any slack.)
-        if w.lanes & (1 << k) == 0 || !(w.parallel || w.slack[k].to_bits() == slack.to_bits()) {
+        if w.lanes & (1 << k) == 0 || w.slack[k].to_bits() != slack.to_bits() {
             return None;
         }
         let at = match w.recs[..w.len].iter().position(|e| e.leaf == i) {

@@ -975,13 +975,16 @@ fn mesh_grazing_rays_cross_the_right_triangles() {
 /// rays leaving a mesh's surface toward a light) get from one walk of the
 /// tree exactly the spans each ray's own full walk gives (`spans_on`), with
 /// the boxes tested in AVX and lane by lane; lanes whose point at `tmin`
-/// lies outside the bounds are left to their own queries.
+/// lies outside the bounds get what their nearest queries give
+/// (`spans_nearest_on`, spans and valid end), or with no slacks given are
+/// left to their own queries.
 #[test]
 fn mesh_spans_parallel8_match_single_rays() {
     let seed = 41u64;
     println!("seed {seed}");
     let mut rng = SmallRng::seed_from_u64(seed);
     let (mut lanes_done, mut spans_seen, mut left) = (0usize, 0usize, 0usize);
+    let (mut near_lanes, mut cut_spans) = (0usize, 0usize);
     for (name, (pos, tris)) in [("cube", cube()), ("octasphere(5)", octasphere(5)), ("octasphere(2)", octasphere(2))] {
         let m = MeshData::new(pos.clone(), tris.clone(), InsideRule::Orientation).unwrap();
         for i in 0..1500 {
@@ -1007,32 +1010,49 @@ fn mesh_spans_parallel8_match_single_rays() {
             });
             let x: [Line64; 8] = std::array::from_fn(|k| Line64::of(o[k], d));
             let active = if i % 13 == 0 { 0b1011_0110 } else { 0xff };
-            let q = ParallelRays8 { o: &o, d, tmin: &tmin, tmax: &tmax, x: &x };
+            // Slacks of a few eps and of a fifth of the mesh (cuts past
+            // several crossings), or none (lanes outside left alone).
+            let slack: [f32; 8] = std::array::from_fn(|k| if k % 3 == 0 { 0.2 } else { 4.0 * 1e-6 * (k as f32 + 1.0) });
+            let with_slack = i % 5 != 0;
+            let q = ParallelRays8 { o: &o, d, tmin: &tmin, tmax: &tmax, x: &x, slack: with_slack.then_some(&slack) };
             let mut builds = vec![false];
             if cfg!(target_arch = "x86_64") && std::arch::is_x86_feature_detected!("avx") {
                 builds.push(true);
             }
             for avx in builds {
                 let mut out: [Vec<Span>; 8] = Default::default();
-                let done = m.spans_parallel8_in(&q, (active, avx), 7, &mut out);
+                let (done, valid) = m.spans_parallel8_in(&q, (active, avx), 7, &mut out);
                 for k in 0..8 {
                     let ray = Ray::segment(o[k], d, tmin[k], tmax[k]);
-                    let own_full = active & (1 << k) != 0 && tmax[k] >= tmin[k] && !m.outside_at(o[k], d, tmin[k]);
-                    assert_eq!(done & (1 << k) != 0, own_full, "seed {seed} {name} ray {i} lane {k} (avx {avx}): done mask");
-                    if !own_full {
+                    let outside = m.outside_at(o[k], d, tmin[k]);
+                    let taken = active & (1 << k) != 0 && tmax[k] >= tmin[k] && (!outside || with_slack);
+                    assert_eq!(done & (1 << k) != 0, taken, "seed {seed} {name} ray {i} lane {k} (avx {avx}): done mask");
+                    if !taken {
                         left += 1;
                         continue;
                     }
                     let mut want: Vec<Span> = Vec::new();
-                    m.spans_on(&ray, x[k], 7, &mut want);
+                    let want_valid = if outside {
+                        near_lanes += 1;
+                        m.spans_nearest_on(&ray, x[k], slack[k], 7, &mut want)
+                    } else {
+                        m.spans_on(&ray, x[k], 7, &mut want);
+                        f32::INFINITY
+                    };
                     let bits = |v: &[Span]| v.iter().map(|s| (s.t0.to_bits(), s.s0, s.t1.to_bits(), s.s1)).collect::<Vec<_>>();
                     assert_eq!(bits(&out[k]), bits(&want), "seed {seed} {name} ray {i} lane {k} (avx {avx}): spans differ");
+                    assert_eq!(valid[k].to_bits(), want_valid.to_bits(), "seed {seed} {name} ray {i} lane {k} (avx {avx}): valid end");
                     lanes_done += 1;
                     spans_seen += want.len();
+                    cut_spans += (outside && want.last().is_some_and(|s| !s.s1.is_real())) as usize;
                 }
             }
         }
     }
-    println!("{lanes_done} lanes done, {spans_seen} spans, {left} lanes left to their own queries");
+    println!(
+        "{lanes_done} lanes done ({near_lanes} starting outside the bounds, {cut_spans} of them cut at their slack), \
+         {spans_seen} spans, {left} lanes left to their own queries"
+    );
     assert!(lanes_done > 30_000 && spans_seen > 10_000 && left > 5_000, "too few lanes or spans exercised");
+    assert!(near_lanes > 5_000 && cut_spans > 1_000, "too few lanes starting outside, or cut by their slack");
 }

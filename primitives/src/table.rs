@@ -1078,32 +1078,35 @@ impl LeafTable {
 
     /// The spans of mesh leaf `i` for eight world rays with one direction
     /// `d` and their own origins `o[k]` on `[tmin[k], tmax[k]]` (a packet of
-    /// shadow rays toward a directional light): the lanes of `active` whose
-    /// own query walks the mesh to its box exit get exactly its spans, in
-    /// one walk of the tree ([`MeshData::spans_parallel8`]). Returns those
-    /// lanes; the others are left to `spans_for`.
+    /// shadow rays toward a directional light), in one walk of the tree
+    /// ([`MeshData::spans_parallel8`]): the lanes of `active` whose own
+    /// query walks the mesh to its box exit get exactly its spans, and with
+    /// nearest-mode slacks `slack` those starting outside the mesh's bounds
+    /// get exactly their nearest queries' spans. Returns those lanes and
+    /// where each one's spans stop being exact; the others are left to
+    /// `spans_for`.
     pub fn mesh_parallel8(
         &self,
         i: u32,
         (o, d): (&[Vec3; 8], Vec3),
-        (tmin, tmax): (&[f32; 8], &[f32; 8]),
+        (tmin, tmax, slack): (&[f32; 8], &[f32; 8], Option<&[f32; 8]>),
         active: u32,
         out: &mut [Vec<Span>; 8],
-    ) -> u32 {
+    ) -> (u32, [f32; 8]) {
         let iu = i as usize;
         if self.kind[iu] != LeafKind::Mesh {
-            return 0;
+            return (0, [f32::INFINITY; 8]);
         }
         // The rays' lines through the f64 map (as `mesh_spans`): one local
         // direction for all.
         let lines: [(Vec3, Vec3, Line64); 8] = std::array::from_fn(|k| self.mesh_line(iu, o[k], d));
         let ld = lines[0].1;
         if Ray::dir_rescale(ld).is_some() {
-            return 0;
+            return (0, [f32::INFINITY; 8]);
         }
         let lo: [Vec3; 8] = std::array::from_fn(|k| lines[k].0);
         let x: [Line64; 8] = std::array::from_fn(|k| lines[k].2);
-        let q = ParallelRays8 { o: &lo, d: ld, tmin, tmax, x: &x };
+        let q = ParallelRays8 { o: &lo, d: ld, tmin, tmax, x: &x, slack };
         self.meshes[self.ext[iu] as usize].spans_parallel8(&q, active, i, out)
     }
 
