@@ -135,7 +135,8 @@ impl MeshData {
                 }
             } else {
                 let n = self.wide.node(cur);
-                let hit = rays.hit(n, tmin, f32::INFINITY, m);
+                // (A nearest lane's cut prunes as its own walk's does.)
+                let hit = rays.hit(n, tmin, &cut, m);
                 // A lane's own walk pushes the children it meets from the
                 // first slot on and enters the last at once: children in
                 // decreasing slot order, each with the lanes that meet it.

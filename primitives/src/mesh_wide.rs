@@ -258,9 +258,9 @@ impl ParRays8 {
     }
 
     /// Per child slot of `n`, the lanes of `lanes` whose ray meets it within
-    /// `[tlo[k], thi]` (as [`Ray4::hit`] of each lane says).
+    /// `[tlo[k], thi[k]]` (as [`Ray4::hit`] of each lane says).
     #[inline(always)]
-    pub(super) fn hit(&self, n: &Node4, tlo: &[f32; 8], thi: f32, lanes: u32) -> [u32; 4] {
+    pub(super) fn hit(&self, n: &Node4, tlo: &[f32; 8], thi: &[f32; 8], lanes: u32) -> [u32; 4] {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
             // SAFETY: the CPU has AVX.
@@ -271,13 +271,13 @@ impl ParRays8 {
 
     /// [`ParRays8::hit`] lane by lane (what CPUs without AVX run).
     #[inline(always)]
-    fn hit_lanes(&self, n: &Node4, tlo: &[f32; 8], thi: f32, lanes: u32) -> [u32; 4] {
+    fn hit_lanes(&self, n: &Node4, tlo: &[f32; 8], thi: &[f32; 8], lanes: u32) -> [u32; 4] {
         let mut out = [0u32; 4];
         let mut m = lanes;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
-            let (c, _) = self.one[k].hit(n, tlo[k], thi);
+            let (c, _) = self.one[k].hit(n, tlo[k], thi[k]);
             for (s, o) in out.iter_mut().enumerate() {
                 *o |= ((c >> s) & 1) << k;
             }
@@ -288,12 +288,12 @@ impl ParRays8 {
     /// [`ParRays8::hit`] with the eight lanes in one AVX register per child.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn hit_avx(&self, n: &Node4, tlo: &[f32; 8], thi: f32) -> [u32; 4] {
+    unsafe fn hit_avx(&self, n: &Node4, tlo: &[f32; 8], thi: &[f32; 8]) -> [u32; 4] {
         use std::arch::x86_64::*;
         let o = [_mm256_loadu_ps(self.o[0].as_ptr()), _mm256_loadu_ps(self.o[1].as_ptr()), _mm256_loadu_ps(self.o[2].as_ptr())];
         let Ray4 { inv, near: near_of, zero, .. } = self.one[0];
         let inv = [_mm256_set1_ps(inv[0].x), _mm256_set1_ps(inv[1].x), _mm256_set1_ps(inv[2].x)];
-        let (lo8, hi8) = (_mm256_loadu_ps(tlo.as_ptr()), _mm256_set1_ps(thi));
+        let (lo8, hi8) = (_mm256_loadu_ps(tlo.as_ptr()), _mm256_loadu_ps(thi.as_ptr()));
         let eps = _mm256_set1_ps(SLAB_EPS);
         let sign = _mm256_set1_ps(-0.0);
         let (ninf, inf) = (_mm256_set1_ps(f32::NEG_INFINITY), _mm256_set1_ps(f32::INFINITY));
