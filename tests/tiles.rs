@@ -941,6 +941,62 @@ fn packets_walk_many_meshes_together() {
     assert!(c.parallel_mesh_lanes > rays / 20, "too few shadow lanes walked in parallel to test");
 }
 
+/// Shadow packets (one direction) that start outside a mesh's bounds read
+/// its nearest query's answer from the packet's walk of it
+/// (`MeshData::spans_parallel8` with slacks), exact only up to where that
+/// answer stops, and every ray still gets what it gets alone: balls minus
+/// octahedron meshes around them (which hide all or most of each ball:
+/// the subtracted mesh must be read past its first crossing), balls cut
+/// by meshes, meshes alone, more meshes than the packet path walks ahead,
+/// packets aimed at the objects from outside their meshes. Mutation
+/// caught: a lane's mesh answer taken as exact on its whole range.
+#[test]
+fn shadow_packets_read_meshes_they_start_outside() {
+    let (mut rays, mut blocked, mut shadows) = (0u64, 0u64, 0u64);
+    let _ = rothray::csg::take_eval_counts();
+    for seed in 0x7a30..0x7a30 + 12u64 {
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..4 {
+            let mut centres = Vec::new();
+            let mut trees = Vec::new();
+            for _ in 0..rng.gen_range(6..10) {
+                let c = rp(&mut rng, 3.0);
+                centres.push(c);
+                let r = rng.gen_range(0.5..1.0);
+                let ball = Shape::Sphere { c: c + rp(&mut rng, 0.1), r: r * rng.gen_range(0.3..0.75) };
+                let octa = octa_mesh(c, r, rng.gen_range(0..3));
+                trees.push(match rng.gen_range(0..4) {
+                    0 | 1 => Shape::Diff(vec![ball, octa]),
+                    2 => Shape::Inter(vec![octa, ball]),
+                    _ => octa,
+                });
+            }
+            let scene = bake(&trees);
+            remove_mesh_files(&trees);
+            let mut ps = PacketScratch::default();
+            let mut ts = TileScratch::default();
+            for t in 0..16 {
+                // From 2.5 to 4 radii away, aimed at an object's centre.
+                let c = centres[t % centres.len()];
+                let d = rp(&mut rng, 1.0).try_normalize().unwrap_or(DVec3::X);
+                let o = c - d * rng.gen_range(2.5..4.0);
+                let (packet, region) = shadow_packet(&mut rng, o, d);
+                let what = || format!("seed {seed:#x} case {case} tile {t}");
+                let (_, b, _) = check_packet(&scene, (&mut ps, &mut ts), (&packet, &region), &what);
+                (blocked, rays) = (blocked + b, rays + 8);
+            }
+            shadows += 1;
+        }
+    }
+    let c = rothray::csg::take_eval_counts();
+    println!(
+        "{rays} shadow rays in {shadows} scenes, {blocked} blocked; lanes of parallel mesh walks {}, left {}",
+        c.parallel_mesh_lanes, c.parallel_mesh_left
+    );
+    assert!(blocked > rays / 10 && blocked < rays * 9 / 10, "too few rays blocked, or too many, to test");
+    assert!(c.parallel_mesh_lanes > rays / 2, "too few lanes walked in parallel to test");
+}
+
 /// A small object: a kernel leaf (sheared in some), a torus, or a union,
 /// intersection or difference of two to six of them (bounded first
 /// operand), some operands near twins of another.
