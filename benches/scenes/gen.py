@@ -755,18 +755,69 @@ def knob_cut_field():
     return scene("knob_cut_field", [0, 0, 10], [0, 0, -1], 40, objs)
 
 
+def knob_cut_union():
+    """60 knob meshes (turned and scaled), each minus a ball, in one union:
+    a wide union of subtrees with meshes. Not in the suite: `gen.py --out
+    DIR knob_cut_union` (copies knob.obj to DIR)."""
+    rng = random.Random(9)
+    kids = []
+    for _ in range(60):
+        c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)]
+        k = X(mesh("knob.obj"), translate=c, rotate=[rng.uniform(0, 360), rng.uniform(0, 360), 0],
+              scale=rng.uniform(0.5, 0.9))
+        kids.append(D(k, sphere([c[0] + 0.3, c[1] + 0.3, c[2] + 0.3], 0.35)))
+    return scene("knob_cut_union", [0, 0, 10], [0, 0, -1], 40, [obj("knobs", U(*kids), [0.7, 0.6, 0.9])])
+
+
+def knob_mixed_union():
+    """40 knob meshes and 200 balls in one union, over a ground plane. Not
+    in the suite: `gen.py --out DIR knob_mixed_union` (copies knob.obj to
+    DIR)."""
+    rng = random.Random(10)
+    kids = []
+    for _ in range(40):
+        c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)]
+        kids.append(X(mesh("knob.obj"), translate=c, rotate=[rng.uniform(0, 360), rng.uniform(0, 360), 0],
+                      scale=rng.uniform(0.4, 0.8)))
+    for _ in range(200):
+        c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)]
+        kids.append(sphere(c, rng.uniform(0.1, 0.3)))
+    return scene("knob_mixed_union", [0, 0, 10], [0, 0, -1], 40,
+                 [obj("things", U(*kids), [0.7, 0.6, 0.9]), obj("ground", plane([0, 1, 0], -3.5), [0.8, 0.8, 0.8])])
+
+
+def sweep_union():
+    """80 short swept-sphere tubes in one union, over a ground plane. Not in
+    the suite: `gen.py --out DIR sweep_union`."""
+    rng = random.Random(7)
+    kids = []
+    for _ in range(80):
+        c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-4, 0)]
+        s = rng.uniform(0.4, 0.9)
+        p0 = [c[0] - s, c[1], c[2]]
+        p3 = [c[0] + s, c[1] + rng.uniform(-s, s), c[2] + rng.uniform(-s, s)]
+        p1 = [c[0] - s / 3, c[1] + rng.uniform(-s, s), c[2] + rng.uniform(-s, s)]
+        p2 = [c[0] + s / 3, c[1] + rng.uniform(-s, s), c[2] + rng.uniform(-s, s)]
+        r = rng.uniform(0.05, 0.15)
+        kids.append(sweep(bez(p0, p1, p2, p3, r, r * rng.uniform(0.5, 1.5))))
+    return scene("sweep_union", [0, 0, 10], [0, 0, -1], 40,
+                 [obj("tubes", U(*kids), [0.6, 0.8, 0.5]), obj("ground", plane([0, 1, 0], -3.5), [0.8, 0.8, 0.8])])
+
+
 # Scenes made on request only (`--out DIR NAME`), for measurements outside
 # the suite.
 EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000,
                                  forest_deep4, forest4, forest_tori,
                                  forest_arches, tori_deep, knob_union,
-                                 knob_cut_field)}
+                                 knob_cut_field, knob_cut_union,
+                                 knob_mixed_union, sweep_union)}
 
 
 def main(argv):
     out_dir = HERE
     if argv[:1] == ["--out"]:
         out_dir, argv = argv[1], argv[2:]
+        os.makedirs(out_dir, exist_ok=True)
     names = argv or list(SCENES)
     if out_dir == HERE:
         knob_obj(os.path.join(HERE, "knob.obj"))
