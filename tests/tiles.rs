@@ -699,7 +699,7 @@ fn first_entries_of_unions(seed0: u64, deep: bool) {
 }
 
 /// Packets of a tile find the first entries of wide unions whose children
-/// are ring tori among kernel leaves (`FirstWalk::take_torus`: each lane's
+/// are ring tori among kernel leaves (`FirstWalk::take_leaf_lanes`: each lane's
 /// nearest query of a torus from the packet's preps), nodes of a torus
 /// and a kernel leaf (`FirstWalk::take_torus_node`) and trees with tori
 /// (`FirstWalk::take_torus_tree`), and every ray still
@@ -797,7 +797,7 @@ fn packets_find_first_entries_of_unions_with_tori() {
 }
 
 /// Packets find the first entries of wide unions with meshes among their
-/// children (`FirstWalk::take_mesh`, each lane's answer read from the
+/// children (`FirstWalk::take_leaf_lanes`, each lane's answer read from the
 /// packet's walk of the mesh), also where a tile meets only a few of them
 /// (the tile keeps the union whole with a list: a narrow union of meshes
 /// is no packet node), and every ray still gets exactly what it gets

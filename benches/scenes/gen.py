@@ -746,13 +746,17 @@ def knob_cut_field():
     in the suite: `gen.py --out DIR knob_cut_field` (copies knob.obj to
     DIR)."""
     rng = random.Random(5)
-    objs = []
-    for i in range(60):
-        c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)]
-        k = X(mesh("knob.obj"), translate=c, rotate=[rng.uniform(0, 360), rng.uniform(0, 360), 0],
-              scale=rng.uniform(0.5, 0.9))
-        objs.append(obj("k%d" % i, D(k, sphere([c[0] + 0.3, c[1] + 0.3, c[2] + 0.3], 0.35)), hsv(rng.random())))
+    objs = [obj("k%d" % i, cut_knob(rng), hsv(rng.random())) for i in range(60)]
     return scene("knob_cut_field", [0, 0, 10], [0, 0, -1], 40, objs)
+
+
+def cut_knob(rng):
+    """A knob mesh placed, turned and scaled at random, minus a ball near
+    its centre (knob_cut_field's objects, knob_cut_union's children)."""
+    c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)]
+    k = X(mesh("knob.obj"), translate=c, rotate=[rng.uniform(0, 360), rng.uniform(0, 360), 0],
+          scale=rng.uniform(0.5, 0.9))
+    return D(k, sphere([c[0] + 0.3, c[1] + 0.3, c[2] + 0.3], 0.35))
 
 
 def knob_cut_union():
@@ -760,12 +764,7 @@ def knob_cut_union():
     a wide union of subtrees with meshes. Not in the suite: `gen.py --out
     DIR knob_cut_union` (copies knob.obj to DIR)."""
     rng = random.Random(9)
-    kids = []
-    for _ in range(60):
-        c = [rng.uniform(-6, 6), rng.uniform(-3, 3), rng.uniform(-3, 0)]
-        k = X(mesh("knob.obj"), translate=c, rotate=[rng.uniform(0, 360), rng.uniform(0, 360), 0],
-              scale=rng.uniform(0.5, 0.9))
-        kids.append(D(k, sphere([c[0] + 0.3, c[1] + 0.3, c[2] + 0.3], 0.35)))
+    kids = [cut_knob(rng) for _ in range(60)]
     return scene("knob_cut_union", [0, 0, 10], [0, 0, -1], 40, [obj("knobs", U(*kids), [0.7, 0.6, 0.9])])
 
 

@@ -24,11 +24,11 @@
 //!
 //! A ring torus among the children has no 8-lane solve: each lane reads
 //! its nearest query from the packet's preps, the answer its own walk reads
-//! (`FirstWalk::take_torus`); a child node of kernel leaves and tori is
+//! (`FirstWalk::take_leaf_lanes`); a child node of kernel leaves and tori is
 //! swept as an object of that node is (`FirstWalk::take_torus_node`), and
 //! a small tree of them by its truth table (`FirstWalk::take_torus_tree`).
 //! A mesh child's lanes read their answers from the packet's walk of the
-//! mesh (`FirstWalk::take_mesh`). Any other child without a packet path (a
+//! mesh (`FirstWalk::take_leaf_lanes`). Any other child without a packet path (a
 //! sweep, a larger tree) stops the walk: every lane walks in order.
 //!
 //! A wide union of small trees ([`Program::is_meet_union`]: a forest of
@@ -370,11 +370,11 @@ impl FirstWalk<'_> {
                     let leaf = self.prog.first[c];
                     if !self.leaves.has_kernel8(leaf) {
                         if self.leaves.has_torus_prep(leaf) {
-                            self.take_torus(leaf, m, &tbox);
+                            self.take_leaf_lanes::<false>(leaf, m, &tbox);
                             continue;
                         }
                         if self.leaves.is_mesh(leaf) {
-                            self.take_mesh(leaf, m, &tbox);
+                            self.take_leaf_lanes::<true>(leaf, m, &tbox);
                             continue;
                         }
                         self.stop();
@@ -419,104 +419,82 @@ impl FirstWalk<'_> {
         r
     }
 
-    /// Takes child leaf `leaf`, a ring torus (no 8-lane solve), for the
-    /// lanes `m` whose box entries are `tbox`: each lane's nearest query on
-    /// its whole range from the packet's preps ([`PacketMemo::torus_lane`],
-    /// the answer its lane walk reads), taken by `take_answer`. A lane
-    /// outside the preps is left to its walk. Why: one torus among a
-    /// union's children stopped the walk for every lane (a forest whose
-    /// trunks were rings: 4.0x POV-Ray's speed flat, against 5.9x for the
-    /// forest).
+    /// Takes child leaf `leaf`, a ring torus (no 8-lane solve) or a mesh
+    /// (`MESH`), for the lanes `m` whose box entries are `tbox`: each
+    /// lane's nearest query on its whole range, the answer its lane walk
+    /// reads, from the packet's preps ([`PacketMemo::torus_lane`]) or its
+    /// walk of the mesh ([`PacketMemo::nearest_lane`], clipped to a shorter
+    /// range), taken by `take_answer`. A lane the packet does not answer is
+    /// left to its walk. Why: one torus among a union's children stopped
+    /// the walk for every lane (a forest whose trunks were rings: 4.0x
+    /// POV-Ray's speed flat, against 5.9x for the forest), and a mesh did
+    /// (60 knob meshes in a union: each lane walked the children in order,
+    /// 4.5x flat).
     #[inline(never)]
-    fn take_torus(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
+    fn take_leaf_lanes<const MESH: bool>(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
         let mut m = m;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             counts::wide_child();
             let mut spans = FirstSpans::default();
-            let v = self.memo.torus_lane(self.leaves, leaf, k, ((self.tmin[k], self.tmax[k]), true), &mut spans);
-            self.take_answer(k, v, &spans, tbox[k]);
-        }
-    }
-
-    /// Takes child leaf `leaf`, a mesh, for the lanes `m` whose box entries
-    /// are `tbox`: each lane's nearest-mode answer on its whole range from
-    /// the packet's walk of the mesh ([`PacketMemo::nearest_lane`], the
-    /// record its lane walk is served from, clipped to its range). That
-    /// answer stops at `v_m`, `4 eps` past the mesh's first crossing
-    /// (`MeshData::spans_nearest`): its first span `[a_m, v_m]` is cut
-    /// there, where a lane's walk that takes it first is cut too
-    /// (`stop_at_first_entry`: the same `a + 4 eps`), so the mesh's
-    /// unknown rest past `v_m` bounds the second start only where `v_m`
-    /// comes earlier. Its later spans bound the second start; a lane
-    /// starting inside the mesh, or that the packet does not answer, is
-    /// left to its walk. (No `8 eps` rule as for a torus: a shorter
-    /// range's answer is the same record clipped; a short first span
-    /// settles no lane, `FirstWalk::finish`.) Why: a mesh among a union's
-    /// children stopped the walk for every lane (60 knob meshes in a
-    /// union: each lane walked the children in order, 4.5x POV-Ray's
-    /// speed flat).
-    #[inline(never)]
-    fn take_mesh(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
-        let mut m = m;
-        while m != 0 {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            counts::wide_child();
-            let mut spans = FirstSpans::default();
-            let eps = self.eps[k];
             let range = (self.tmin[k], self.tmax[k]);
-            let Some(v) = self.memo.nearest_lane(self.leaves, leaf, (k, range), RayCtx::nearest_slack_of(eps), &mut spans) else {
-                self.live &= !(1 << k);
-                continue;
+            let v = if MESH {
+                self.memo.nearest_lane(self.leaves, leaf, (k, range), RayCtx::nearest_slack_of(self.eps[k]), &mut spans)
+            } else {
+                self.memo.torus_lane(self.leaves, leaf, k, (range, true), &mut spans)
             };
-            let Some(first) = spans.first else {
-                self.second[k] = self.second[k].min(v);
-                continue;
-            };
-            if !first.s0.is_real() {
-                // Inside at the range's start.
-                self.live &= !(1 << k);
-                continue;
-            }
-            if v < (first.t0 + 4.0 * eps).max(first.t0.next_up()) {
-                self.second[k] = self.second[k].min(v);
-            }
-            self.second[k] = self.second[k].min(spans.rest);
-            self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox[k]);
+            self.take_answer(k, v, &spans, (tbox[k], MESH));
         }
     }
 
     /// Takes lane `k`'s nearest-mode answer of a leaf child on its whole
     /// range, exact up to `v` (`None`: the packet does not answer; the lane
-    /// is left to its walk), whose box entry is `tbox`. Its first span
-    /// counts only where it starts on the range with a real entry and is
+    /// is left to its walk), whose box entry is `tbox`; a lane starting
+    /// inside the leaf is left to its walk, and later spans bound the
+    /// second start. For a torus, the first span counts only where it is
     /// longer than `8 eps` (as a small tree's, [`FirstWalk::take_first`]):
-    /// then its entry is the one a shorter range's query gives too, and a
-    /// settled lane's answer is that entry cut at `v` (its exit never
-    /// read). Later spans, a short first span (which the lane's walk may
-    /// ask again in full, `leaf_asks_again`), and the place the answer
-    /// stops being exact (the next span may start there) bound the second
-    /// start, so no lane settles where the leaf might come first or fuse
+    /// then its entry is the one polished root a shorter range's query
+    /// gives too, and a settled lane's answer is that entry cut at `v` (its
+    /// exit never read); a short first span (which the lane's walk may ask
+    /// again in full, `leaf_asks_again`) and the place the answer stops
+    /// being exact (the next span may start there) bound the second start,
+    /// so no lane settles where the torus might come first or fuse
     /// (margins: a nearest query's later span, or its stop, lies past its
-    /// first span's exit). A lane starting inside the leaf is left to its
-    /// walk.
+    /// first span's exit). A mesh's answer stops at `v_m`, `4 eps` past its
+    /// first crossing (`MeshData::spans_nearest`): its first span `[a_m,
+    /// v_m]` is cut there, where a lane's walk that takes it first is cut
+    /// too (`stop_at_first_entry`: the same `a + 4 eps`), so `v_m` bounds
+    /// the second start only where it comes earlier; no `8 eps` rule (a
+    /// shorter range's answer is the same record clipped; a short first
+    /// span settles no lane, `FirstWalk::finish`).
     #[inline(always)]
-    fn take_answer(&mut self, k: usize, v: Option<f32>, spans: &FirstSpans, tbox: f32) {
+    fn take_answer(&mut self, k: usize, v: Option<f32>, spans: &FirstSpans, (tbox, mesh): (f32, bool)) {
         let Some(v) = v else {
             self.live &= !(1 << k);
             return;
         };
-        self.second[k] = self.second[k].min(v).min(spans.rest);
-        let Some(first) = spans.first else { return };
+        let eps = self.eps[k];
+        let Some(first) = spans.first else {
+            self.second[k] = self.second[k].min(v);
+            return;
+        };
         if !first.s0.is_real() {
             // Inside at the range's start.
             self.live &= !(1 << k);
-        } else if first.t1 - first.t0 > 8.0 * self.eps[k] {
+            return;
+        }
+        self.second[k] = self.second[k].min(spans.rest);
+        if mesh {
+            if v < (first.t0 + 4.0 * eps).max(first.t0.next_up()) {
+                self.second[k] = self.second[k].min(v);
+            }
+            self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox);
+        } else if first.t1 - first.t0 > 8.0 * eps {
+            self.second[k] = self.second[k].min(v);
             self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox);
         } else {
-            self.second[k] = self.second[k].min(first.t0);
+            self.second[k] = self.second[k].min(v).min(first.t0);
         }
     }
 
