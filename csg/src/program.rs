@@ -241,6 +241,9 @@ impl PacketMemo {
     /// sweep), appended to `out`, and where they stop being exact, from
     /// the packet's records: the meshes walked ahead, else the mesh walks
     /// made when a lane first asks; `None` when the packet does not answer.
+    // (A wrapper of `mesh_lane`'s shape: with the mesh's part folded in,
+    // inlined or not, knob_union took 0.3-0.9% more instructions,
+    // callgrind 480x270 flat.)
     #[inline(always)]
     pub(crate) fn nearest_lane<S: SpanSink + ?Sized>(
         &self,
