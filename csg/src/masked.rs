@@ -225,7 +225,7 @@ impl Program {
                 combine_into(Op::Union, acc, res.as_slice(), eps, tmp);
             }
             if let Some(t) = first_unmasked(acc.as_slice(), mask, eps) {
-                let v = (t + 4.0 * eps).max(t.next_up());
+                let v = super::entry_stop(t, eps);
                 if v < hi {
                     acc.truncate_at(v);
                     hi = v;

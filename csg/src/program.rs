@@ -1405,6 +1405,17 @@ fn operands_end(s: &[Span], mode: Mode, eps: f32) -> f32 {
     }
 }
 
+/// Where a nearest query stops past a first entry at `t` with tolerance
+/// `eps`: `4 eps` on (the nearest-mode slack, [`RayCtx::nearest_slack_of`],
+/// as a mesh's nearest walk stops past its first crossing), and past `t`
+/// at least. A union's walk ([`stop_at_first_entry`]), a masked second
+/// try and the first-entry walk's reading of a mesh's answer
+/// (`union_first.rs`) all cut there: one place, the same bits.
+#[inline(always)]
+pub(crate) fn entry_stop(t: f32, eps: f32) -> f32 {
+    (t + RayCtx::nearest_slack_of(eps)).max(t.next_up())
+}
+
 /// A union in [`Mode::Nearest`] is needed only a little past its first confirmed
 /// entry `t0` (the query's answer is there or before): truncates `acc` at
 /// `v = t0 + 4 eps` and returns `v` when that is before `hi`. The result stays
@@ -1430,7 +1441,7 @@ fn stop_at_first_entry(acc: &mut SpanList, (lo, hi): (f32, f32), mode: Mode, eps
         // the range would leave them nothing to show.
         Mode::Nearest | Mode::Before if s.t1 - s.t0 <= eps => return None,
         Mode::Before if s.t0 - lo > 2.0 * eps => s.t0,
-        Mode::Nearest | Mode::Before => (s.t0 + 4.0 * eps).max(s.t0.next_up()),
+        Mode::Nearest | Mode::Before => entry_stop(s.t0, eps),
     };
     if v < hi {
         acc.truncate_at(v);

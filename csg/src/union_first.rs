@@ -62,7 +62,7 @@ use super::small_first::{small_first, Clipped, SmallFirst, SmallOps};
 use super::small_first8::{small_first8, First8, Ranges, Two};
 use super::torus_sweep::torus_operands;
 use super::tree_first::{done_by, solved_late, tree_first, TreeShape, TREE_LEAVES};
-use super::{cand_key, sort_few, NodeKind, PacketMemo, Program, RayCtx};
+use super::{cand_key, entry_stop, sort_few, NodeKind, PacketMemo, Program, RayCtx};
 use crate::counts;
 
 /// Past the first entry `a`, the other children's boxes entered beyond
@@ -486,7 +486,7 @@ impl FirstWalk<'_> {
         }
         self.second[k] = self.second[k].min(spans.rest);
         if mesh {
-            if v < (first.t0 + 4.0 * eps).max(first.t0.next_up()) {
+            if v < entry_stop(first.t0, eps) {
                 self.second[k] = self.second[k].min(v);
             }
             self.put(k, (first.t0, first.t1), (first.s0, first.s1), tbox);
