@@ -837,7 +837,21 @@ impl Program {
                             f32::INFINITY
                         } else if self.frameless(cu) {
                             let ask = Ask { leaves, ctx, mode };
-                            self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub, cand })
+                            let v = self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub, cand });
+                            if v < ct1 && sub.is_empty() && self.kind[frames[top].node as usize] == NodeKind::Union {
+                                // Empty up to where it stopped (a mesh's first
+                                // span cut away by a ball): asked again in full
+                                // here, or it would cut the whole union there
+                                // and the object be redone in full.
+                                self.eval_frameless(
+                                    cu,
+                                    Ask { mode: Mode::All, ..ask },
+                                    (ct0, ct1),
+                                    Lists { leaf, tmp: &mut *tmp, acc: &mut *sub, cand },
+                                )
+                            } else {
+                                v
+                            }
                         } else {
                             let ask = Ask { leaves, ctx, mode: Mode::All };
                             let lists = SmallLists { out: &mut *sub, deeper: small, leaf: &mut *leaf, tmp: &mut *tmp };
