@@ -29,7 +29,9 @@
 //! a small tree of them by its truth table (`FirstWalk::take_torus_tree`).
 //! A mesh child's lanes read their answers from the packet's walk of the
 //! mesh (`FirstWalk::take_leaf_lanes`). Any other child without a packet path (a
-//! sweep, a larger tree) stops the walk: every lane walks in order.
+//! sweep, a larger tree) stops the walk: every lane walks in order. A
+//! union none of whose children has one ([`Program::first_take`], asked at
+//! bake: meshes each minus a ball) is not walked at all.
 //!
 //! A wide union of small trees ([`Program::is_meet_union`]: a forest of
 //! trees cut by half-spaces, of rounded or hollowed pieces) is walked the
@@ -316,6 +318,59 @@ impl<'a> FirstWalk<'a> {
     }
 }
 
+/// How the first-entry walk takes a child node of its union
+/// ([`Program::first_take`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Take {
+    /// A leaf with an 8-lane kernel, solved for the packet.
+    Kernel,
+    /// A ring torus: each lane's answer from the packet's preps.
+    Torus,
+    /// A mesh: each lane's answer from the packet's walk of it.
+    Mesh,
+    /// A narrow intersection or difference of a few kernel leaves.
+    Small,
+    /// A small tree of kernel leaves, by its shape.
+    Tree,
+    /// A node of kernel leaves and tori, swept.
+    TorusNode,
+    /// A small tree of kernel leaves and tori, by its truth table.
+    TorusTree,
+    /// No packet path (a sweep, a mesh minus a ball, a larger tree): the
+    /// walk stops, and every lane walks in order.
+    Stop,
+}
+
+impl Program {
+    /// How the first-entry walk takes child node `c`. Asked by the walk
+    /// for each child it solves, and at bake for each wide union's
+    /// children: a union none of whose children the walk takes is not
+    /// walked ([`Wide::first_walk`](super::Wide::first_walk)).
+    #[inline(always)]
+    pub(crate) fn first_take(&self, leaves: &LeafTable, c: usize) -> Take {
+        match self.kind[c] {
+            NodeKind::Leaf => {
+                let leaf = self.first[c];
+                if leaves.has_kernel8(leaf) {
+                    Take::Kernel
+                } else if leaves.has_torus_prep(leaf) {
+                    Take::Torus
+                } else if leaves.is_mesh(leaf) {
+                    Take::Mesh
+                } else {
+                    Take::Stop
+                }
+            }
+            _ if self.small_leafy(c) => Take::Small,
+            // (Of several levels, or one of more operands than `take_small`'s.)
+            _ if self.is_tree(c) => Take::Tree,
+            _ if self.torus_node(leaves, c) => Take::TorusNode,
+            _ if self.is_torus_tree(leaves, c) => Take::TorusTree,
+            _ => Take::Stop,
+        }
+    }
+}
+
 impl Visit8 for FirstWalk<'_> {
     #[inline(always)]
     fn visit(&mut self, pos: u32, lanes: u32, rays: &Lanes8) {
@@ -365,21 +420,9 @@ impl FirstWalk<'_> {
                 continue;
             }
             let c = self.prog.child_at(self.n, pos) as usize;
-            match self.prog.kind[c] {
-                NodeKind::Leaf => {
+            match self.prog.first_take(self.leaves, c) {
+                Take::Kernel => {
                     let leaf = self.prog.first[c];
-                    if !self.leaves.has_kernel8(leaf) {
-                        if self.leaves.has_torus_prep(leaf) {
-                            self.take_leaf_lanes::<false>(leaf, m, &tbox);
-                            continue;
-                        }
-                        if self.leaves.is_mesh(leaf) {
-                            self.take_leaf_lanes::<true>(leaf, m, &tbox);
-                            continue;
-                        }
-                        self.stop();
-                        break;
-                    }
                     let (memo, leaves) = (self.memo, self.leaves);
                     let solved = memo.with_solve::<true, _>(leaves, leaf, |r| self.take(leaf, m, r, &tbox));
                     if solved.is_none() {
@@ -387,12 +430,13 @@ impl FirstWalk<'_> {
                         self.take(leaf, m, &r, &tbox);
                     }
                 }
-                _ if self.prog.small_leafy(c) => self.take_small(c, m, &tbox),
-                // (Of several levels, or one of more operands than `take_small`'s.)
-                _ if self.prog.is_tree(c) => self.take_tree(pos, c, m, &tbox),
-                _ if self.prog.torus_node(self.leaves, c) => self.take_torus_node(c, m, &tbox),
-                _ if self.prog.is_torus_tree(self.leaves, c) => self.take_torus_tree(c, m, &tbox),
-                _ => {
+                Take::Torus => self.take_leaf_lanes::<false>(self.prog.first[c], m, &tbox),
+                Take::Mesh => self.take_leaf_lanes::<true>(self.prog.first[c], m, &tbox),
+                Take::Small => self.take_small(c, m, &tbox),
+                Take::Tree => self.take_tree(pos, c, m, &tbox),
+                Take::TorusNode => self.take_torus_node(c, m, &tbox),
+                Take::TorusTree => self.take_torus_tree(c, m, &tbox),
+                Take::Stop => {
                     self.stop();
                     break;
                 }

@@ -171,7 +171,8 @@ impl UnionRecords {
         // are answered at once (`union_first.rs`); the others walk.
         let mut first: [Option<LaneFirst>; 8] = [None; 8];
         let mut starts = [f32::INFINITY; 8];
-        if prog.wide_of(nu).unbounded.is_empty() {
+        let w = prog.wide_of(nu);
+        if w.unbounded.is_empty() && w.first_walk {
             let mut eps = [0.0f32; 8];
             fill_lanes(&mut eps, |k| self.rays[k].1);
             let mut fw = FirstWalk::new((prog, nu, leaves, memo), (&o, &d), (tmin, tmax, eps), lanes, &mut self.pending);
