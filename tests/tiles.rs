@@ -1314,3 +1314,54 @@ fn pick_hits(seed0: u64, object: fn(&mut SmallRng, f64) -> Shape) -> (u64, u64, 
     println!("{rays} rays, {hits} hits, {shadows} blocked; lanes settled among the objects {}, left {}", c.object_settled, c.object_left);
     (rays, hits, shadows, c)
 }
+
+/// Tiles write a narrow union of the children they meet for a wide union
+/// of pieces the packets' first-entry walk cannot take (meshes each minus
+/// a ball: `Wide::first_walk` is false, so the union is no meet union and
+/// is not kept whole with a list), and every ray still gets exactly what
+/// it gets alone, nearest and any hit: 12-40 pieces crowded so that rays
+/// start inside some, balls over the pieces' fronts and inside them,
+/// camera packets thin and wide, shadow packets from the pieces' centres.
+/// Tiles must both narrow such unions and list them (where they meet more
+/// than six pieces) for the test to mean anything.
+#[test]
+fn tiles_narrow_unions_of_bitten_meshes() {
+    let (mut rays, mut hits, mut shadows) = (0u64, 0u64, 0u64);
+    let (mut written, mut lists) = (0u64, 0u64);
+    for seed in 0x7b10..0x7b10 + 8u64 {
+        println!("seed {seed:#x}");
+        let mut rng = SmallRng::seed_from_u64(seed);
+        for case in 0..3 {
+            let mut centres = Vec::new();
+            let pieces: Vec<Shape> = (0..rng.gen_range(12..40))
+                .map(|_| {
+                    let c = rp(&mut rng, 1.5);
+                    centres.push(c);
+                    let r = rng.gen_range(0.2..0.6);
+                    let ball = Shape::Sphere { c: c + rp(&mut rng, r), r: r * rng.gen_range(0.3..0.7) };
+                    Shape::Diff(vec![octa_mesh(c, r, rng.gen_range(0..3)), ball])
+                })
+                .collect();
+            let trees = vec![Shape::Union(pieces)];
+            let scene = bake(&trees);
+            remove_mesh_files(&trees);
+            let mut ps = PacketScratch::default();
+            let mut ts = TileScratch::default();
+            for t in 0..24 {
+                let (o, d) = random_ray(&mut rng);
+                let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
+                let half = if t % 4 < 2 { (0.15, 0.1) } else { (rng.gen_range(0.002..0.02), rng.gen_range(0.002..0.02)) };
+                let (packet, region) =
+                    if t % 6 == 5 { shadow_packet(&mut rng, centres[t % centres.len()], d) } else { camera_packet(&mut rng, o, d, half) };
+                let what = || format!("seed {seed:#x} case {case} tile {t}");
+                let (h, s, _) = check_packet(&scene, (&mut ps, &mut ts), (&packet, &region), &what);
+                (hits, shadows, rays) = (hits + h, shadows + s, rays + 8);
+            }
+            let c = ts.take_counts().spec;
+            (written, lists) = (written + c.nodes_written, lists + c.lists);
+        }
+    }
+    println!("{rays} rays, {hits} hits, {shadows} blocked; tiles wrote {written} nodes and {lists} lists");
+    assert!(hits > rays / 4 && shadows > rays / 10, "too few hits or shadows to test");
+    assert!(written > 50 && lists > 10, "tiles must narrow and list such unions for the test to mean anything");
+}

@@ -67,10 +67,9 @@ pub struct Wide {
     pub(crate) trees: tree_first::TreeShapes,
     /// Some child has a path in a packet's first-entry walk
     /// ([`Program::first_take`]): else packets do not walk the union
-    /// (`union_packet.rs`; a union of meshes each minus a ball stopped
-    /// that walk at its first child, 7% of the instructions of such a
-    /// scene, callgrind 480x270 flat). False in a tile's own wide nodes,
-    /// which packets do not walk.
+    /// (`union_packet.rs`: a union of sweeps stopped that walk at its
+    /// first child, and it is no [`Program::is_meet_union`]). False in a
+    /// tile's own wide nodes, which packets do not walk.
     pub(crate) first_walk: bool,
 }
 

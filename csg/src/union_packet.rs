@@ -310,7 +310,13 @@ impl Program {
     /// children are kernel leaves or small trees of them
     /// ([`Program::small_leafy`], `Program::is_tree`; a walk that meets
     /// another kind answers no lane). A forest of trees cut by half-spaces
-    /// is one.
+    /// is one. A union none of whose children that walk takes
+    /// ([`Wide::first_walk`](super::Wide::first_walk) false: meshes each
+    /// minus a ball) is not: tiles then write a narrow union of the few
+    /// children they meet instead of keeping it whole with a list, and its
+    /// objects are asked lane by lane. (60 such pieces in a union: one
+    /// thread at 1920x1080, 0.83 of the time flat and 0.82 lit; callgrind
+    /// 480x270 flat -14% instructions.)
     #[inline]
     pub fn is_meet_union(&self, n: u32) -> bool {
         let nu = n as usize;
@@ -319,6 +325,7 @@ impl Program {
             && self.count[nu] >= PACKET_UNION_MIN
             && (self.wide[nu] as usize) < self.wides.len()
             && self.wides[self.wide[nu] as usize].unbounded.is_empty()
+            && self.wides[self.wide[nu] as usize].first_walk
     }
 
     /// Is node `c` an intersection or difference of at most
