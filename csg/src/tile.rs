@@ -345,6 +345,15 @@ impl Spec<'_> {
                 let mut pos: smallvec::SmallVec<[u32; NARROW_UNION]> = self.tp.kids[at..].iter().copied().collect();
                 self.tp.kids.truncate(at);
                 pos.sort_unstable();
+                if !b.leafy[nu] {
+                    // Subtrees nearest first from the tile's origins (ties in
+                    // the tree's order): a lane that finds its entry in a
+                    // near one skips the boxes beyond it, and a packet walks
+                    // fewer meshes.
+                    let o = self.region.origins();
+                    let near = |p: u32| b.bounds[b.children[first + p as usize] as usize].near_from(&o);
+                    pos.sort_by(|&p, &q| near(p).total_cmp(&near(q)));
+                }
                 for p in pos {
                     if let Some(x) = self.node(b.children[first + p as usize], depth + 1, nearest) {
                         self.tp.kids.push(x);
