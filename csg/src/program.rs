@@ -845,11 +845,14 @@ impl Program {
                         } else if self.frameless(cu) {
                             let ask = Ask { leaves, ctx, mode };
                             let v = self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub, cand });
-                            if v < ct1 && sub.is_empty() && self.kind[frames[top].node as usize] == NodeKind::Union {
+                            if mode == Mode::Nearest && v < ct1 && sub.is_empty() && self.kind[frames[top].node as usize] == NodeKind::Union
+                            {
                                 // Empty up to where it stopped (a mesh's first
                                 // span cut away by a ball): asked again in full
                                 // here, or it would cut the whole union there
-                                // and the object be redone in full.
+                                // and the object be redone in full. (The check
+                                // costs scenes/cheese 0.24% of its instructions,
+                                // out of line or not.)
                                 self.eval_frameless(
                                     cu,
                                     Ask { mode: Mode::All, ..ask },
