@@ -803,13 +803,32 @@ def sweep_union():
                  [obj("tubes", U(*kids), [0.6, 0.8, 0.5]), obj("ground", plane([0, 1, 0], -3.5), [0.8, 0.8, 0.8])])
 
 
+def sweep_cut_union():
+    """sweep_union's 80 tubes, each minus a ball at its middle, in one
+    union over a ground plane: a wide union of pieces the packets'
+    first-entry walk cannot take. Not in the suite: `gen.py --out DIR
+    sweep_cut_union`."""
+    sc = sweep_union()
+    sc["objects"][0]["name"] = "bitten tubes"
+    tubes = sc["objects"][0]["shape"]["union"]
+    rng = random.Random(8)
+    cut = []
+    for t in tubes:
+        pts = t["swept_sphere"]["bezier"]
+        mid = [(a + b) / 2 for a, b in zip(pts[0][:3], pts[-1][:3])]
+        cut.append(D(t, sphere(mid, rng.uniform(0.1, 0.2))))
+    sc["objects"][0]["shape"] = U(*cut)
+    return sc
+
+
 # Scenes made on request only (`--out DIR NAME`), for measurements outside
 # the suite.
 EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000,
                                  forest_deep4, forest4, forest_tori,
                                  forest_arches, tori_deep, knob_union,
                                  knob_cut_field, knob_cut_union,
-                                 knob_mixed_union, sweep_union)}
+                                 knob_mixed_union, sweep_union,
+                                 sweep_cut_union)}
 
 
 def main(argv):
