@@ -1322,12 +1322,16 @@ fn pick_hits(seed0: u64, object: fn(&mut SmallRng, f64) -> Shape) -> (u64, u64, 
 /// it gets alone, nearest and any hit: 12-40 pieces crowded so that rays
 /// start inside some, balls over the pieces' fronts and inside them,
 /// camera packets thin and wide, shadow packets from the pieces' centres.
-/// Tiles must both narrow such unions and list them (where they meet more
-/// than six pieces) for the test to mean anything.
+/// In two thirds of the scenes balls and boxes are pieces too: the union is
+/// walked for first entries, and the lanes whose reach meets a bitten mesh
+/// leave that walk. Tiles must both narrow such unions and list them
+/// (where they meet more than six pieces), and the walk settle some lanes,
+/// for the test to mean anything.
 #[test]
 fn tiles_narrow_unions_of_bitten_meshes() {
     let (mut rays, mut hits, mut shadows) = (0u64, 0u64, 0u64);
     let (mut written, mut lists) = (0u64, 0u64);
+    let _ = rothray::csg::take_eval_counts();
     for seed in 0x7b10..0x7b10 + 8u64 {
         println!("seed {seed:#x}");
         let mut rng = SmallRng::seed_from_u64(seed);
@@ -1342,6 +1346,17 @@ fn tiles_narrow_unions_of_bitten_meshes() {
                     Shape::Diff(vec![octa_mesh(c, r, rng.gen_range(0..3)), ball])
                 })
                 .collect();
+            let mut pieces = pieces;
+            if case > 0 {
+                for _ in 0..rng.gen_range(40..120) {
+                    let c = rp(&mut rng, 1.5);
+                    pieces.push(if rng.gen_bool(0.7) {
+                        Shape::Sphere { c, r: rng.gen_range(0.03..0.2) }
+                    } else {
+                        Shape::Box { min: c, max: c + DVec3::splat(rng.gen_range(0.05..0.3)) }
+                    });
+                }
+            }
             let trees = vec![Shape::Union(pieces)];
             let scene = bake(&trees);
             remove_mesh_files(&trees);
@@ -1361,7 +1376,13 @@ fn tiles_narrow_unions_of_bitten_meshes() {
             (written, lists) = (written + c.nodes_written, lists + c.lists);
         }
     }
-    println!("{rays} rays, {hits} hits, {shadows} blocked; tiles wrote {written} nodes and {lists} lists");
+    let c = rothray::csg::take_eval_counts();
+    println!(
+        "{rays} rays, {hits} hits, {shadows} blocked; tiles wrote {written} nodes and {lists} lists; \
+         lanes settled by first entries {}, left to their own queries {}",
+        c.first_settled, c.object_left
+    );
     assert!(hits > rays / 4 && shadows > rays / 10, "too few hits or shadows to test");
     assert!(written > 50 && lists > 10, "tiles must narrow and list such unions for the test to mean anything");
+    assert!(c.first_settled > 150 && c.object_left > 1000, "too few lanes settled, or left, to test");
 }

@@ -631,7 +631,7 @@ impl<'a> ProgramBuilder<'a> {
             drop(ids);
             wide = p.wides.len() as u32;
             let trees = tree_first::TreeShapes::of(p, self.leaves, &flat);
-            let first_walk = flat.iter().any(|&c| p.first_take(self.leaves, c as usize) != union_first::Take::Stop);
+            let first_walk = flat.iter().any(|&c| p.first_walk_takes(self.leaves, c as usize));
             p.wides.push(Arc::new(Wide { bvh, unbounded, packet, trees, first_walk }));
         }
         let id = p.kind.len() as u32;
