@@ -785,6 +785,19 @@ def knob_mixed_union():
                  [obj("things", U(*kids), [0.7, 0.6, 0.9]), obj("ground", plane([0, 1, 0], -3.5), [0.8, 0.8, 0.8])])
 
 
+def knob_mixed_cut_union():
+    """knob_mixed_union with its 40 knobs replaced by knob_cut_union's
+    pieces (a knob minus a ball, placed anew): a wide union of balls, which
+    the packets' first-entry walk takes, and pieces it cannot take. Not in the suite: `gen.py --out DIR
+    knob_mixed_cut_union` (copies knob.obj to DIR)."""
+    sc = knob_mixed_union()
+    sc["objects"][0]["name"] = "cut things"
+    rng = random.Random(10)
+    kids = sc["objects"][0]["shape"]["union"]
+    sc["objects"][0]["shape"] = U(*[cut_knob(rng) if "mesh" in json.dumps(k) else k for k in kids])
+    return sc
+
+
 def sweep_union():
     """80 short swept-sphere tubes in one union, over a ground plane. Not in
     the suite: `gen.py --out DIR sweep_union`."""
@@ -827,8 +840,8 @@ EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000,
                                  forest_deep4, forest4, forest_tori,
                                  forest_arches, tori_deep, knob_union,
                                  knob_cut_field, knob_cut_union,
-                                 knob_mixed_union, sweep_union,
-                                 sweep_cut_union)}
+                                 knob_mixed_union, knob_mixed_cut_union,
+                                 sweep_union, sweep_cut_union)}
 
 
 def main(argv):
