@@ -828,6 +828,8 @@ impl Program {
                     let f = &scratch.frames[top];
                     let (ct0, ct1) = (f.tmin, f.tmax);
                     let mode = self.child_mode(f.node as usize, f.next, f.mode);
+                    // (Read beside `child_mode`'s read of the same kind.)
+                    let in_union = self.kind[f.node as usize] == NodeKind::Union;
                     if self.kind[c as usize] == NodeKind::Leaf {
                         let Scratch { frames, accs, tmp, leaf, .. } = scratch;
                         leaf.clear();
@@ -845,8 +847,7 @@ impl Program {
                         } else if self.frameless(cu) {
                             let ask = Ask { leaves, ctx, mode };
                             let v = self.eval_frameless(cu, ask, (ct0, ct1), Lists { leaf, tmp: &mut *tmp, acc: &mut *sub, cand });
-                            if mode == Mode::Nearest && v < ct1 && sub.is_empty() && self.kind[frames[top].node as usize] == NodeKind::Union
-                            {
+                            if in_union && mode == Mode::Nearest && v < ct1 && sub.is_empty() {
                                 // Empty up to where it stopped (a mesh's first
                                 // span cut away by a ball): asked again in full
                                 // here, or it would cut the whole union there
