@@ -427,6 +427,34 @@ fn check_packet(
     (hits, shadows, inside)
 }
 
+/// [`check_packet`] on 24 tiles aimed at random over `scene`: camera
+/// packets, half of them wide and half thin, and every `shadow_every`-th
+/// a shadow packet from one of `centres`. Returns the hits, the blocked
+/// rays and the rays leaving a solid, and the tiles' counts.
+fn check_random_tiles(
+    scene: &rothray::engine::RenderScene,
+    rng: &mut SmallRng,
+    (centres, shadow_every): (&[DVec3], usize),
+    what: &dyn Fn(usize) -> String,
+) -> ((u64, u64, u64), rothray::engine::TileStats) {
+    let mut ps = PacketScratch::default();
+    let mut ts = TileScratch::default();
+    let mut sums = (0, 0, 0);
+    for t in 0..24 {
+        let (o, d) = random_ray(rng);
+        let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
+        let half = if t % 4 < 2 { (0.15, 0.1) } else { (rng.gen_range(0.002..0.02), rng.gen_range(0.002..0.02)) };
+        let (packet, region) = if t % shadow_every == shadow_every - 1 {
+            shadow_packet(rng, centres[t % centres.len()], d)
+        } else {
+            camera_packet(rng, o, d, half)
+        };
+        let (h, b, i) = check_packet(scene, (&mut ps, &mut ts), (&packet, &region), &|| what(t));
+        sums = (sums.0 + h, sums.1 + b, sums.2 + i);
+    }
+    (sums, ts.take_counts())
+}
+
 /// Packets of a tile walk its wide unions of leaves together, and every
 /// ray still gets exactly (bit for bit) what it gets alone: camera packets
 /// (one origin) and packets of parallel rays from a box of origins (a
@@ -841,18 +869,9 @@ fn packets_find_first_entries_of_unions_with_meshes() {
             let trees = vec![Shape::Union(kids)];
             let scene = bake(&trees);
             remove_mesh_files(&trees);
-            let mut ps = PacketScratch::default();
-            let mut ts = TileScratch::default();
-            for t in 0..24 {
-                let (o, d) = random_ray(&mut rng);
-                let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
-                let half = if t % 4 < 2 { (0.15, 0.1) } else { (rng.gen_range(0.002..0.02), rng.gen_range(0.002..0.02)) };
-                let (packet, region) =
-                    if t % 8 == 7 { shadow_packet(&mut rng, centres[t % centres.len()], d) } else { camera_packet(&mut rng, o, d, half) };
-                let what = || format!("seed {seed:#x} case {case} tile {t}");
-                let (h, _, i) = check_packet(&scene, (&mut ps, &mut ts), (&packet, &region), &what);
-                (hits, inside, rays) = (hits + h, inside + i, rays + 8);
-            }
+            let what = |t: usize| format!("seed {seed:#x} case {case} tile {t}");
+            let ((h, _, i), _) = check_random_tiles(&scene, &mut rng, (&centres, 8), &what);
+            (hits, inside, rays) = (hits + h, inside + i, rays + 24 * 8);
         }
     }
     let c = rothray::csg::take_eval_counts();
@@ -1360,19 +1379,10 @@ fn tiles_narrow_unions_of_bitten_meshes() {
             let trees = vec![Shape::Union(pieces)];
             let scene = bake(&trees);
             remove_mesh_files(&trees);
-            let mut ps = PacketScratch::default();
-            let mut ts = TileScratch::default();
-            for t in 0..24 {
-                let (o, d) = random_ray(&mut rng);
-                let (o, d) = (o.as_vec3().as_dvec3(), d.normalize());
-                let half = if t % 4 < 2 { (0.15, 0.1) } else { (rng.gen_range(0.002..0.02), rng.gen_range(0.002..0.02)) };
-                let (packet, region) =
-                    if t % 6 == 5 { shadow_packet(&mut rng, centres[t % centres.len()], d) } else { camera_packet(&mut rng, o, d, half) };
-                let what = || format!("seed {seed:#x} case {case} tile {t}");
-                let (h, s, _) = check_packet(&scene, (&mut ps, &mut ts), (&packet, &region), &what);
-                (hits, shadows, rays) = (hits + h, shadows + s, rays + 8);
-            }
-            let c = ts.take_counts().spec;
+            let what = |t: usize| format!("seed {seed:#x} case {case} tile {t}");
+            let ((h, b, _), counts) = check_random_tiles(&scene, &mut rng, (&centres, 6), &what);
+            (hits, shadows, rays) = (hits + h, shadows + b, rays + 24 * 8);
+            let c = counts.spec;
             (written, lists) = (written + c.nodes_written, lists + c.lists);
         }
     }
