@@ -330,7 +330,7 @@ pub(crate) enum Take {
     /// A small tree of kernel leaves and tori, by its truth table.
     TorusTree,
     /// No packet path (a sweep, a mesh minus a ball, a larger tree): the
-    /// walk stops, and every lane walks in order.
+    /// lanes that reach it leave the walk.
     Stop,
 }
 
