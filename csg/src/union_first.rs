@@ -473,6 +473,23 @@ impl FirstWalk<'_> {
     /// 4.5x flat).
     #[inline(never)]
     fn take_leaf_lanes<const MESH: bool>(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
+        if MESH {
+            // One look-up of the packet's walk for all the lanes.
+            let memo = self.memo;
+            if let Some((w, at)) = memo.mesh_walk(self.leaves, leaf) {
+                let mut m = m;
+                while m != 0 {
+                    let k = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    counts::wide_child();
+                    let mut spans = FirstSpans::default();
+                    let range = (self.tmin[k], self.tmax[k]);
+                    let v = w.serve_lane(at, (k, range), RayCtx::nearest_slack_of(self.eps[k]), &mut spans);
+                    self.take_answer(k, v, &spans, (tbox[k], true));
+                }
+                return;
+            }
+        }
         let mut m = m;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
