@@ -473,35 +473,36 @@ impl FirstWalk<'_> {
     /// 4.5x flat).
     #[inline(never)]
     fn take_leaf_lanes<const MESH: bool>(&mut self, leaf: u32, m: u32, tbox: &[f32; 8]) {
-        if MESH {
-            // One look-up of the packet's walk for all the lanes.
-            let memo = self.memo;
-            if let Some((w, at)) = memo.mesh_walk(self.leaves, leaf) {
-                let mut m = m;
-                while m != 0 {
-                    let k = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    counts::wide_child();
-                    let mut spans = FirstSpans::default();
-                    let range = (self.tmin[k], self.tmax[k]);
-                    let v = w.serve_lane(at, (k, range), RayCtx::nearest_slack_of(self.eps[k]), &mut spans);
-                    self.take_answer(k, v, &spans, (tbox[k], true));
-                }
-                return;
-            }
+        let (memo, leaves) = (self.memo, self.leaves);
+        if !MESH {
+            self.take_lanes::<false>(m, tbox, |k, range, _, spans| memo.torus_lane(leaves, leaf, k, (range, true), spans));
+        } else if let Some((w, at)) = memo.mesh_walk(leaves, leaf) {
+            // The packet's walk, looked up once for all the lanes (per
+            // lane, in the loop, knob_union read 0.7% more instructions).
+            self.take_lanes::<true>(m, tbox, |k, range, slack, spans| w.serve_lane(at, (k, range), slack, spans));
+        } else {
+            // (A mesh walked ahead for every packet.)
+            self.take_lanes::<true>(m, tbox, |k, range, slack, spans| memo.nearest_lane(leaves, leaf, (k, range), slack, spans));
         }
+    }
+
+    /// [`FirstWalk::take_leaf_lanes`]'s loop over the lanes `m`, each
+    /// lane's answer on its whole range (with its nearest-mode slack) from
+    /// `answer`.
+    #[inline(always)]
+    fn take_lanes<const MESH: bool>(
+        &mut self,
+        m: u32,
+        tbox: &[f32; 8],
+        mut answer: impl FnMut(usize, (f32, f32), f32, &mut FirstSpans) -> Option<f32>,
+    ) {
         let mut m = m;
         while m != 0 {
             let k = m.trailing_zeros() as usize;
             m &= m - 1;
             counts::wide_child();
             let mut spans = FirstSpans::default();
-            let range = (self.tmin[k], self.tmax[k]);
-            let v = if MESH {
-                self.memo.nearest_lane(self.leaves, leaf, (k, range), RayCtx::nearest_slack_of(self.eps[k]), &mut spans)
-            } else {
-                self.memo.torus_lane(self.leaves, leaf, k, (range, true), &mut spans)
-            };
+            let v = answer(k, (self.tmin[k], self.tmax[k]), RayCtx::nearest_slack_of(self.eps[k]), &mut spans);
             self.take_answer(k, v, &spans, (tbox[k], MESH));
         }
     }
