@@ -1433,12 +1433,13 @@ fn operands_end(s: &[Span], mode: Mode, eps: f32) -> f32 {
 /// Where a nearest query stops past a first entry at `t` with tolerance
 /// `eps`: `4 eps` on (the nearest-mode slack, [`RayCtx::nearest_slack_of`],
 /// as a mesh's nearest walk stops past its first crossing), and past `t`
-/// at least. A union's walk ([`stop_at_first_entry`]), a masked second
+/// at least ([`rothray_primitives::mesh::stop_past`], where every mesh
+/// walk stops). A union's walk ([`stop_at_first_entry`]), a masked second
 /// try and the first-entry walk's reading of a mesh's answer
 /// (`union_first.rs`) all cut there: one place, the same bits.
 #[inline(always)]
 pub(crate) fn entry_stop(t: f32, eps: f32) -> f32 {
-    (t + RayCtx::nearest_slack_of(eps)).max(t.next_up())
+    rothray_primitives::mesh::stop_past(t, RayCtx::nearest_slack_of(eps))
 }
 
 /// A union in [`Mode::Nearest`] is needed only a little past its first confirmed

@@ -474,6 +474,17 @@ fn intersect_in(r: &WoopRay, tri: &[Vec3; 3], ball: [f32; 4], tlo: f32, thi: f32
     (b.hits != 0).then(|| (b.t.x, b.det.x > 0.0))
 }
 
+/// Where a nearest-mode walk may stop once it has met a crossing at `t`:
+/// `slack` past it, and past `t` at least. Every nearest walk of a mesh
+/// (one ray, a packet from one origin, a packet with one direction) cuts
+/// there, and a CSG union's nearest query cuts its first entry there too
+/// (`rothray_csg`'s `entry_stop`): the same bits, so a packet's answer is
+/// the ray's own.
+#[inline(always)]
+pub fn stop_past(t: f32, slack: f32) -> f32 {
+    (t + slack).max(t.next_up())
+}
+
 /// [`intersect_in`] for a triangle alone (its own ball).
 #[cfg(test)]
 fn intersect(r: &WoopRay, tri: &[Vec3; 3], tlo: f32, thi: f32) -> Option<(f32, bool)> {
@@ -1380,7 +1391,7 @@ impl MeshData {
                 let b = blk.test(&r4, tmin, cut);
                 self.block_crossings(blk, &b, &r, (tmin, cut), &mut |c: Crossing| {
                     xs.push(c);
-                    cut = cut.min((c.t + slack).max(c.t.next_up()));
+                    cut = cut.min(stop_past(c.t, slack));
                 });
             } else {
                 let n = self.wide.node(cur);
@@ -1465,7 +1476,7 @@ impl MeshData {
         let line = |k: usize| exact.map_or(Line64::of(o, d[k]), |(xo, xd)| Line64 { o: xo, d: xd[k], rounded: true });
         // Where ray `k`'s walk may stop once it has met a crossing at `t`.
         let stop = |k: usize, t: f32| {
-            let c = (t + slack[k]).max(t.next_up());
+            let c = stop_past(t, slack[k]);
             let [a, b] = through[k];
             if t >= a && t <= b {
                 c.max(b)

@@ -31,7 +31,7 @@ use glam::Vec3;
 use smallvec::SmallVec;
 
 use super::wide::ParRays8;
-use super::{wide, Crossing, InsideRule, Line64, MeshData, Walk, WoopRay, STACK};
+use super::{stop_past, wide, Crossing, InsideRule, Line64, MeshData, Walk, WoopRay, STACK};
 use crate::Span;
 
 /// Eight rays `o[k] + t d` on `[tmin[k], tmax[k]]`, each the rounding of
@@ -130,7 +130,7 @@ impl MeshData {
                     let b = blk.test(&r4, tmin[k], *ck);
                     self.block_crossings(blk, &b, &r, (tmin[k], *ck), &mut |c: Crossing| {
                         xk.push(c);
-                        *ck = ck.min((c.t + sk).max(c.t.next_up()));
+                        *ck = ck.min(stop_past(c.t, sk));
                     });
                 }
             } else {
