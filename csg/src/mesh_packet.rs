@@ -115,10 +115,7 @@ impl PacketMemo {
         if w.lanes & (1 << k) == 0 || w.slack[k].to_bits() != slack.to_bits() {
             return None;
         }
-        let at = match w.recs[..w.len].iter().position(|e| e.leaf == i) {
-            Some(at) => at,
-            None => w.walk(leaves, i),
-        };
+        let at = w.record(leaves, i);
         w.serve_lane(at, (k, (lo, hi)), slack, out)
     }
 
@@ -135,22 +132,28 @@ impl PacketMemo {
         if self.len > 0 && self.entry(i).is_some() {
             return None;
         }
-        {
+        let at = {
             let mut w = self.meshes.borrow_mut();
             if w.lanes == 0 {
                 return None;
             }
-            if !w.recs[..w.len].iter().any(|e| e.leaf == i) {
-                w.walk(leaves, i);
-            }
-        }
-        let w = self.meshes.borrow();
-        let at = w.recs[..w.len].iter().position(|e| e.leaf == i)?;
-        Some((w, at))
+            w.record(leaves, i)
+        };
+        Some((self.meshes.borrow(), at))
     }
 }
 
 impl MeshWalks {
+    /// The place of mesh leaf `i`'s record, walked now when no lane asked
+    /// for it before.
+    #[inline(always)]
+    fn record(&mut self, leaves: &LeafTable, i: u32) -> usize {
+        match self.recs[..self.len].iter().position(|e| e.leaf == i) {
+            Some(at) => at,
+            None => self.walk(leaves, i),
+        }
+    }
+
     /// Lane `k`'s answer on `(lo, hi)` from record `at`, as
     /// [`PacketMemo::mesh_lane`] gives it (`None`: the lane does not take
     /// part, another slack, or a range the record does not cover).
