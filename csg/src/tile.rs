@@ -344,20 +344,22 @@ impl Spec<'_> {
                     self.tp.kids.truncate(at);
                     return Some(n);
                 }
-                // A narrow union of the children met, in the tree's order
-                // (the order `combine` meets them in matters only for chains
-                // of near twins: see the module's notes).
+                // A narrow union of the children met, leaves in the tree's
+                // order, subtrees nearest first (the order `combine` meets
+                // them in matters only for chains of near twins: see the
+                // module's notes).
                 let mut pos: smallvec::SmallVec<[u32; NARROW_UNION]> = self.tp.kids[at..].iter().copied().collect();
                 self.tp.kids.truncate(at);
-                pos.sort_unstable();
-                if !b.leafy[nu] {
+                if b.leafy[nu] {
+                    pos.sort_unstable();
+                } else {
                     // Subtrees nearest first from the tile's origins (ties in
                     // the tree's order): a lane that finds its entry in a
                     // near one skips the boxes beyond it, and a packet walks
                     // fewer meshes.
                     let o = self.region.origins();
                     let near = |p: u32| b.bounds[b.children[first + p as usize] as usize].near_from(&o);
-                    pos.sort_by(|&p, &q| near(p).total_cmp(&near(q)));
+                    pos.sort_by(|&p, &q| near(p).total_cmp(&near(q)).then(p.cmp(&q)));
                 }
                 for p in pos {
                     if let Some(x) = self.node(b.children[first + p as usize], depth + 1, nearest) {
