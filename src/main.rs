@@ -584,6 +584,8 @@ fn bench_counters(st: &rothray::engine::RenderStats, rays: u64) -> serde_json::V
         "object_packet_left": st.eval.object_left,
         "masked_tries_sure": st.eval.masked_sure,
         "masked_tries_left": st.eval.masked_left,
+        "deep_sweeps_sure": st.eval.deep_sure,
+        "deep_sweeps_left": st.eval.deep_left,
         "full_redos": st.eval.full_redos,
         "parallel_mesh_lanes": st.eval.parallel_mesh_lanes,
         "mesh_walk_lanes": st.eval.mesh_walk_lanes,

@@ -21,6 +21,8 @@ thread_local! {
     static OBJ_LEFT: Cell<u64> = const { Cell::new(0) };
     static MASKED_SURE: Cell<u64> = const { Cell::new(0) };
     static MASKED_LEFT: Cell<u64> = const { Cell::new(0) };
+    static DEEP_SURE: Cell<u64> = const { Cell::new(0) };
+    static DEEP_LEFT: Cell<u64> = const { Cell::new(0) };
     static FULL_REDOS: Cell<u64> = const { Cell::new(0) };
     static PAR_MESH: Cell<u64> = const { Cell::new(0) };
     static PAR_MESH_LEFT: Cell<u64> = const { Cell::new(0) };
@@ -73,6 +75,12 @@ pub struct EvalCounts {
     pub masked_sure: u64,
     /// Second tries under masks that gave none (the query was redone in full).
     pub masked_left: u64,
+    /// Nearest queries answered by a sweep of the tree's crossings
+    /// (`csg/src/deep_first.rs`).
+    pub deep_sure: u64,
+    /// Sweeps that gave no answer (crossings within 2 eps, the ray
+    /// starting inside, too many crossings).
+    pub deep_left: u64,
     /// Nearest queries of an object redone in full ([`crate::Mode::All`]):
     /// neither the first try nor a second one was sure.
     pub full_redos: u64,
@@ -110,6 +118,8 @@ impl EvalCounts {
         self.object_left += o.object_left;
         self.masked_sure += o.masked_sure;
         self.masked_left += o.masked_left;
+        self.deep_sure += o.deep_sure;
+        self.deep_left += o.deep_left;
         self.full_redos += o.full_redos;
         self.parallel_mesh_lanes += o.parallel_mesh_lanes;
         self.parallel_mesh_left += o.parallel_mesh_left;
@@ -198,6 +208,16 @@ pub fn masked_try(sure: bool) {
     }
 }
 
+/// A sweep of a tree's crossings: it gave an answer, or not.
+#[inline(always)]
+pub fn deep_try(sure: bool) {
+    if sure {
+        bump(&DEEP_SURE)
+    } else {
+        bump(&DEEP_LEFT)
+    }
+}
+
 /// A nearest query redone in full.
 #[inline(always)]
 pub fn full_redo() {
@@ -237,6 +257,8 @@ pub fn take_eval_counts() -> EvalCounts {
         object_left: OBJ_LEFT.with(|c| c.replace(0)),
         masked_sure: MASKED_SURE.with(|c| c.replace(0)),
         masked_left: MASKED_LEFT.with(|c| c.replace(0)),
+        deep_sure: DEEP_SURE.with(|c| c.replace(0)),
+        deep_left: DEEP_LEFT.with(|c| c.replace(0)),
         full_redos: FULL_REDOS.with(|c| c.replace(0)),
         parallel_mesh_lanes: PAR_MESH.with(|c| c.replace(0)),
         parallel_mesh_left: PAR_MESH_LEFT.with(|c| c.replace(0)),

@@ -28,6 +28,8 @@ pub struct FollowCounts {
 impl Follower {
     /// Makes `copy` hold exactly the rows of `base` (and none of its own).
     pub(crate) fn follow(&mut self, copy: &mut Program, base: &Program, counts: &mut FollowCounts) {
+        // (The tile's own rows are written next: new contents.)
+        copy.serial = crate::program::fresh_serial();
         let same = copy.id == base.id && base.id != 0;
         if same && self.version == base.edits.version() {
             self.truncate(copy);
@@ -128,6 +130,7 @@ fn copy_all(copy: &mut Program, base: &Program) {
         ray_plane: _,
         id,
         edits: _,
+        serial: _,
         narrowed_unions: _,
     } = base;
     copy.kind.clone_from(kind);

@@ -112,6 +112,10 @@ pub struct Program {
     pub ray_plane: Option<RayPlane>,
     /// Tells bakes apart (per-tile copies follow the program they copy).
     pub id: u64,
+    /// Tells the contents of programs apart: new at every build, live
+    /// edit and tile copy ([`fresh_serial`]; 0: never set). What a ray's
+    /// scratch keeps of a tree (`deep_first.rs`) is made for one serial.
+    pub serial: u64,
     /// The rows rewritten in place since the bake (see [`Program::record_edit`]).
     pub edits: EditLog,
     /// A tile's narrow unions of leaves written for wide unions of leaves,
@@ -536,6 +540,14 @@ pub struct Scratch {
     small: Vec<SpanList>,
     /// The lists of a nearest query's second try ([`Program::eval_masked`]).
     masked: masked::MaskLists,
+    /// The lists of a sweep of a tree's crossings ([`Program::deep_first`]).
+    deep: deep_first::DeepLists,
+}
+
+/// A serial no program has had ([`Program::serial`]).
+pub(crate) fn fresh_serial() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// Builds a [`Program`] bottom-up.
@@ -734,6 +746,7 @@ impl<'a> ProgramBuilder<'a> {
     pub fn finish(mut self) -> Program {
         static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         self.program.id = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.program.serial = fresh_serial();
         self.program
     }
 }
@@ -743,6 +756,7 @@ impl Program {
     /// sync's re-baked object): copies of the program take just those rows
     /// ([`crate::TileProgram::begin`]).
     pub fn record_edit(&mut self, e: Edit) {
+        self.serial = fresh_serial();
         let size = self.kind.len() + self.children.len() + self.wides.len();
         self.edits.record(e, size);
     }
@@ -1502,6 +1516,8 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
     }
 }
 
+#[path = "deep_first.rs"]
+pub(crate) mod deep_first;
 #[cfg(test)]
 #[path = "lane_ends.rs"]
 mod lane_ends;

@@ -131,6 +131,10 @@ pub(crate) struct Retry {
     /// after a nearest-mode try that its cut entries would mostly leave
     /// unsure.
     pub masked_first: bool,
+    /// The root's tree is narrow and of at most `DEEP_LEAVES` leaves: an
+    /// unsure query tries the sweep of its crossings first
+    /// (`Program::deep_first`).
+    pub deep: bool,
 }
 
 /// Is `f`, the first surface of `spans`, a sure nearest answer when
@@ -333,6 +337,9 @@ impl RenderScene {
         }
         let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);
         let Some(f) = sure_first(scratch.out.as_slice(), (valid, tmax), ctx.eps) else {
+            if let Some(f) = self.deep_try(obj, ctx, range, scratch) {
+                return f;
+            }
             if prog.masks_help(root) {
                 // A second try that sees past the cut entries before the
                 // redo in full.
@@ -358,7 +365,22 @@ impl RenderScene {
     /// (Out of line: the common path of `object_first` keeps its code.)
     #[inline(never)]
     fn masked_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
+        if let Some(f) = self.deep_try(obj, ctx, range, scratch) {
+            return f;
+        }
         self.masked_try(obj, ctx, range, scratch).unwrap_or_else(|| self.redo(obj, ctx, (range.0, range.1, range.1), scratch))
+    }
+
+    /// The first surface of object `obj` on `range` from the sweep of its
+    /// tree's crossings (`csg/src/deep_first.rs`), for an object whose tree
+    /// it takes (`None`: no answer).
+    fn deep_try(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<Option<(f32, Surf)>> {
+        if !self.retry[obj.oi as usize].deep {
+            return None;
+        }
+        let f = obj.prog.deep_first(&self.leaves, ctx, obj.root, range, scratch);
+        rothray_csg::counts::deep_try(f.is_some());
+        f
     }
 
     /// The first surface of object `obj` on `range` from the masked try
