@@ -233,6 +233,18 @@ impl RenderScene {
         self.program.small.fill(0);
     }
 
+    /// Turns off the sweep of a tree's crossings for unsure nearest queries
+    /// (`Program::deep_first`): they take the masked try and the redo in
+    /// full as before. For tests of those (the sweep answers most of their
+    /// rays) and measurements; a live sync bakes changed objects with the
+    /// sweep on again.
+    #[doc(hidden)]
+    pub fn without_deep_sweeps(&mut self) {
+        for r in self.retry.iter_mut() {
+            r.deep = false;
+        }
+    }
+
     /// How many nodes of the baked program are small trees' roots (for tests).
     #[doc(hidden)]
     pub fn small_tree_roots(&self) -> usize {
