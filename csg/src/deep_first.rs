@@ -55,10 +55,23 @@ struct Shape {
     key: (u64, u32),
     /// Whether the sweep takes the tree.
     fits: bool,
-    /// Per leaf slot (post-order): its leaf, and whether it is subtracted
-    /// an odd number of times (its surfaces bound the tree flipped).
-    leaves: Vec<(u32, bool)>,
+    /// Per leaf slot (post-order).
+    leaves: Vec<ShapeLeaf>,
     steps: Vec<Step>,
+}
+
+/// A leaf of a [`Shape`].
+#[derive(Clone, Copy, Debug)]
+struct ShapeLeaf {
+    leaf: u32,
+    /// It is subtracted an odd number of times: its surfaces bound the
+    /// tree flipped.
+    flip: bool,
+    /// It is subtracted by no difference: a point inside the tree is
+    /// inside one such leaf at least (a union's operand, an
+    /// intersection's, a difference's first), so the tree's first entry
+    /// is no nearer than theirs.
+    positive: bool,
 }
 
 /// The lists of a sweep, kept in [`Scratch`] and reused from ray to ray.
@@ -91,14 +104,15 @@ impl Program {
         shape.leaves.clear();
         shape.steps.clear();
         // (node, flip, depth, children done)
-        let mut stack = vec![(root, false, 0usize, false)];
+        // (node, flip, positive, depth, children done)
+        let mut stack = vec![(root, false, true, 0usize, false)];
         shape.fits = false;
-        while let Some((n, flip, depth, done)) = stack.pop() {
+        while let Some((n, flip, positive, depth, done)) = stack.pop() {
             let nu = n as usize;
             let kind = self.kind[nu];
             if kind == NodeKind::Leaf {
                 shape.steps.push(Step::Leaf(shape.leaves.len() as u32));
-                shape.leaves.push((self.first[nu], flip));
+                shape.leaves.push(ShapeLeaf { leaf: self.first[nu], flip, positive });
                 if shape.leaves.len() > DEEP_LEAVES {
                     return;
                 }
@@ -111,12 +125,12 @@ impl Program {
             if self.wide[nu] != u32::MAX || depth >= DEEP_DEPTH || self.narrowed(n) {
                 return;
             }
-            stack.push((n, flip, depth, true));
+            stack.push((n, flip, positive, depth, true));
             let first = self.first[nu] as usize;
             let children = &self.children[first..first + self.count[nu] as usize];
             for (k, &c) in children.iter().enumerate().rev() {
                 let sub = kind == NodeKind::Difference && k > 0;
-                stack.push((c, flip ^ sub, depth + 1, false));
+                stack.push((c, flip ^ sub, positive && !sub, depth + 1, false));
             }
         }
         shape.fits = true;
@@ -148,14 +162,26 @@ impl Program {
         if values.len() < shape.leaves.len() {
             values.resize(shape.leaves.len(), 0);
         }
-        for (slot, &(leaf, flip)) in shape.leaves.iter().enumerate() {
-            let mut sink = Crossings { keys, cross, slot: slot as u32, flip, range, inside: false, cut: false };
-            leaf_query(leaves, ctx, leaf, range, None, &mut sink);
+        // The nearest place a positive leaf is inside.
+        let mut near = f32::INFINITY;
+        for (slot, l) in shape.leaves.iter().enumerate() {
+            let at = keys.len();
+            let mut sink = Crossings { keys, cross, slot: slot as u32, flip: l.flip, range, inside: false, cut: false };
+            leaf_query(leaves, ctx, l.leaf, range, None, &mut sink);
             if sink.cut {
                 return None;
             }
-            words.push(if sink.inside { !0 } else { 0 });
+            let inside = sink.inside;
+            if l.positive {
+                near = near.min(if inside { range.0 } else { keys.get(at).map_or(f32::INFINITY, |&k| cand_of_key(k).1) });
+            }
+            words.push(if inside { !0 } else { 0 });
         }
+        if near == f32::INFINITY {
+            return Some(None); // (no positive leaf on the range)
+        }
+        let start = drop_before(near - 4.0 * ctx.eps, (keys, cross), words, range.0);
+        let range = (start, range.1);
         if cross.len() > DEEP_CROSSINGS {
             return None;
         }
@@ -283,6 +309,29 @@ fn tree_value(steps: &[Step], words: &[u64], values: &mut [u64]) -> u64 {
     } else {
         values[0]
     }
+}
+
+/// Drops the crossings before `cut` (nothing there can be inside the
+/// tree: no positive leaf is), each flipping its leaf's word, which then
+/// tells whether the leaf is inside at `cut`; returns the last place
+/// dropped (`lo` when none). Past it, the crossings kept decide: what
+/// `combine` fuses or drops among the dropped ones stays before it.
+/// (benches/scenes/nesting: the wedges a ray enters before the onion's
+/// outer shell.)
+fn drop_before(cut: f32, (keys, cross): (&mut Vec<u64>, &[(u32, Surf)]), words: &mut [u64], lo: f32) -> f32 {
+    if !(cut > lo) {
+        return lo;
+    }
+    let mut last = lo;
+    keys.retain(|&k| {
+        let (i, t) = cand_of_key(k);
+        if t < cut {
+            words[cross[i as usize].0 as usize] ^= !0;
+            last = last.max(t);
+        }
+        t >= cut
+    });
+    last
 }
 
 /// Are the sorted `places` more than `eps2` apart, the first from the
