@@ -170,6 +170,14 @@ pub(crate) fn leaf_solve() {
     bump(&LEAF_SOLVES);
 }
 
+/// `n` leaf queries, `served` of them answered from packet solves (a
+/// lane's batch: `deep_first.rs`).
+#[inline(always)]
+pub(crate) fn leaf_batch(n: u64, served: u64) {
+    LEAVES.with(|x| x.set(x.get() + n));
+    LEAF_SERVED.with(|x| x.set(x.get() + served));
+}
+
 #[inline(always)]
 pub(crate) fn leaf_lane(served: bool) {
     if served {

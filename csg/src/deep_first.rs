@@ -28,6 +28,7 @@
 use rothray_primitives::{LeafTable, Span, SpanSink, Surf};
 
 use super::{cand_key, cand_of_key, leaf_query, NodeKind, Program, RayCtx, Scratch};
+use crate::counts;
 
 /// The most leaves a sweep takes.
 pub const DEEP_LEAVES: usize = 256;
@@ -58,6 +59,20 @@ struct Shape {
     /// Per leaf slot (post-order).
     leaves: Vec<ShapeLeaf>,
     steps: Vec<Step>,
+}
+
+/// What a sweep of a tree's crossings tells ([`Program::deep_first`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DeepFirst {
+    /// The full diagram's first surface on the range (`None`: no surface).
+    Sure(Option<(f32, Surf)>),
+    /// Nothing: crossings within `2 eps` before the entry, the range
+    /// starting inside, a tree the sweep does not take. (Not a window to
+    /// redo in full around the exact set's entry either: clipped there,
+    /// a difference clips its subtrahends to a shorter extent, and that
+    /// regularises otherwise, tests/csg_oracle.rs
+    /// `near_twin_slivers_from_inside`.)
+    Unknown,
 }
 
 /// A leaf of a [`Shape`].
@@ -137,18 +152,14 @@ impl Program {
     }
 
     /// The first surface of node `root` on `range` of the ray by a sweep of
-    /// its leaves' crossings (see the module's doc): `Some` with the full
-    /// diagram's first surface (`None` inside: no surface), or `None` where
-    /// the sweep cannot tell (crossings within `2 eps`, the range starting
-    /// inside, a tree it does not take).
-    pub fn deep_first(
-        &self,
-        leaves: &LeafTable,
-        ctx: &RayCtx,
-        root: u32,
-        range: (f32, f32),
-        scratch: &mut Scratch,
-    ) -> Option<Option<(f32, Surf)>> {
+    /// its leaves' crossings (see the module's doc and [`DeepFirst`]).
+    pub fn deep_first(&self, leaves: &LeafTable, ctx: &RayCtx, root: u32, range: (f32, f32), scratch: &mut Scratch) -> DeepFirst {
+        self.deep_sweep(leaves, ctx, root, range, scratch).unwrap_or(DeepFirst::Unknown)
+    }
+
+    /// [`Program::deep_first`], `None` for [`DeepFirst::Unknown`].
+    #[inline(always)]
+    fn deep_sweep(&self, leaves: &LeafTable, ctx: &RayCtx, root: u32, range: (f32, f32), scratch: &mut Scratch) -> Option<DeepFirst> {
         let DeepLists { shape, words, keys, cross, values } = &mut scratch.deep;
         if shape.key != (self.serial, root) || self.serial == 0 {
             self.deep_shape(root, shape);
@@ -164,10 +175,22 @@ impl Program {
         }
         // The nearest place a positive leaf is inside.
         let mut near = f32::INFINITY;
+        let mut solves = ctx.memo.and_then(|(m, k)| m.lane_solves(k));
+        let mut served = 0;
         for (slot, l) in shape.leaves.iter().enumerate() {
             let at = keys.len();
             let mut sink = Crossings { keys, cross, slot: slot as u32, flip: l.flip, range, inside: false, cut: false };
-            leaf_query(leaves, ctx, l.leaf, range, None, &mut sink);
+            // (A kernel leaf from the packet's solve, read here: through
+            // `leaf_query`, the memo was borrowed again for every leaf.)
+            let read = leaves.has_kernel8(l.leaf) && solves.as_mut().is_some_and(|s| s.spans(leaves, l.leaf, range, &mut sink));
+            if read {
+                served += 1;
+            } else {
+                // (Other kinds take the memo's other records.)
+                let again = solves.take().is_some();
+                leaf_query(leaves, ctx, l.leaf, range, None, &mut sink);
+                solves = ctx.memo.filter(|_| again).and_then(|(m, k)| m.lane_solves(k));
+            }
             if sink.cut {
                 return None;
             }
@@ -177,8 +200,10 @@ impl Program {
             }
             words.push(if inside { !0 } else { 0 });
         }
+        drop(solves);
+        counts::leaf_batch(served, served);
         if near == f32::INFINITY {
-            return Some(None); // (no positive leaf on the range)
+            return Some(DeepFirst::Sure(None)); // (no positive leaf on the range)
         }
         let start = drop_before(near - 4.0 * ctx.eps, (keys, cross), words, range.0);
         let range = (start, range.1);
@@ -214,7 +239,7 @@ impl Program {
                     return None;
                 }
                 let (i, _) = cand_of_key(keys[g - 1]);
-                return Some(Some((place(g - 1), cross[i as usize].1)));
+                return Some(DeepFirst::Sure(Some((place(g - 1), cross[i as usize].1))));
             }
             if g0 + 64 >= gaps {
                 break;
@@ -229,7 +254,7 @@ impl Program {
             g0 += 64;
         }
         // Never inside: no surface, where every crossing is apart.
-        apart((0..keys.len()).map(place), range, eps2, true).then_some(None)
+        apart((0..keys.len()).map(place), range, eps2, true).then_some(DeepFirst::Sure(None))
     }
 
     /// Is node `n` a tile's narrow union written for a wide one, which a

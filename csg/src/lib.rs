@@ -29,6 +29,8 @@ pub use counts::{take_eval_counts, EvalCounts};
 pub use edits::{Edit, EditLog};
 pub use follow::FollowCounts;
 pub use program::object_packet::{FirstOf, Firsts8, LaneRanges};
-pub use program::{first_surface, leaf_asks_again, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch};
+pub use program::{
+    first_surface, leaf_asks_again, DeepFirst, MemoLanes, Mode, NodeKind, PacketMemo, Program, ProgramBuilder, RayCtx, Scratch,
+};
 pub use spans::{combine, spill_count, Op, SpanList};
 pub use tile::{TileCounts, TileProgram};

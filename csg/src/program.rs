@@ -1518,6 +1518,7 @@ pub fn first_surface(spans: &[Span]) -> Option<(f32, Surf)> {
 
 #[path = "deep_first.rs"]
 pub(crate) mod deep_first;
+pub use deep_first::DeepFirst;
 #[cfg(test)]
 #[path = "lane_ends.rs"]
 mod lane_ends;

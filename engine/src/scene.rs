@@ -7,7 +7,7 @@ use std::cell::RefCell;
 
 use glam::Vec3;
 use hecs::Entity;
-use rothray_csg::{first_surface, Mode, Program, RayCtx, Scratch};
+use rothray_csg::{first_surface, DeepFirst, Mode, Program, RayCtx, Scratch};
 use rothray_primitives::{
     bvh::FlatBvh,
     ray::{scale_t, ScaledSink},
@@ -349,7 +349,7 @@ impl RenderScene {
         }
         let valid = prog.eval_in(&self.leaves, root, ctx, range, Mode::Nearest, scratch);
         let Some(f) = sure_first(scratch.out.as_slice(), (valid, tmax), ctx.eps) else {
-            if let Some(f) = self.deep_try(obj, ctx, range, scratch) {
+            if let DeepFirst::Sure(f) = self.deep_try(obj, ctx, range, scratch) {
                 return f;
             }
             if prog.masks_help(root) {
@@ -377,7 +377,7 @@ impl RenderScene {
     /// (Out of line: the common path of `object_first` keeps its code.)
     #[inline(never)]
     fn masked_first(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<(f32, Surf)> {
-        if let Some(f) = self.deep_try(obj, ctx, range, scratch) {
+        if let DeepFirst::Sure(f) = self.deep_try(obj, ctx, range, scratch) {
             return f;
         }
         self.masked_try(obj, ctx, range, scratch).unwrap_or_else(|| self.redo(obj, ctx, (range.0, range.1, range.1), scratch))
@@ -385,13 +385,13 @@ impl RenderScene {
 
     /// The first surface of object `obj` on `range` from the sweep of its
     /// tree's crossings (`csg/src/deep_first.rs`), for an object whose tree
-    /// it takes (`None`: no answer).
-    fn deep_try(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> Option<Option<(f32, Surf)>> {
+    /// it takes.
+    fn deep_try(&self, obj: ObjRef, ctx: &RayCtx, range: (f32, f32), scratch: &mut Scratch) -> DeepFirst {
         if !self.retry[obj.oi as usize].deep {
-            return None;
+            return DeepFirst::Unknown;
         }
         let f = obj.prog.deep_first(&self.leaves, ctx, obj.root, range, scratch);
-        rothray_csg::counts::deep_try(f.is_some());
+        rothray_csg::counts::deep_try(matches!(f, DeepFirst::Sure(_)));
         f
     }
 
