@@ -836,12 +836,53 @@ def sweep_cut_union():
 
 # Scenes made on request only (`--out DIR NAME`), for measurements outside
 # the suite.
+def nesting_deep():
+    """scenes/nesting 100 levels deep (301 leaves): thinner shells, the
+    wedge turned 2.4 degrees a level. Not in the suite:
+    `gen.py --out DIR nesting_deep`."""
+    n = 100
+    node = sphere([0, 0, 0], 0.2, color=[1, 0.9, 0.3])
+    for k in reversed(range(n)):
+        r = 2.0 - k * 0.018
+        shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - 0.009))
+        wedge = X(box([0, -0.5 + 0.005 * k, 0], [3, 3, 3]),
+                  rotate=[0, -2.4 * k, 0], color=[0.3, 0.6, 0.9])
+        node = D(U(shell, node), wedge, color=hsv(k / n, 0.5, 0.95))
+    return scene("nesting_deep", [3.6, 2.8, 4.4], [0, -0.1, 0], 42,
+                 [obj("onion", node, [0.8, 0.8, 0.8])])
+
+
+def nesting_bites():
+    """Nested boxes and balls, each level cut by a ball on a spiral
+    instead of a wedge, and by a half-space every fourth level: 32
+    levels of (shell union deeper levels) minus a bite. Not in the
+    suite: `gen.py --out DIR nesting_bites`."""
+    n = 32
+    node = box([-0.2, -0.2, -0.2], [0.2, 0.2, 0.2], color=[1, 0.9, 0.3])
+    for k in reversed(range(n)):
+        r = 2.0 - k * 0.056
+        if k % 2 == 0:
+            shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - 0.03))
+        else:
+            h = r * 0.8
+            shell = D(box([-h, -h, -h], [h, h, h]),
+                      box([-h + 0.03, -h + 0.03, -h + 0.03], [h - 0.03, h - 0.03, h - 0.03]))
+        a = math.radians(37 * k)
+        bite = sphere([r * math.cos(a), 0.9 - 0.05 * k, r * math.sin(a)], 0.45 * r,
+                      color=[0.3, 0.6, 0.9])
+        cut = [bite, plane([0, 1, 0], 1.2 - 0.03 * k)] if k % 4 == 3 else [bite]
+        node = D(U(shell, node), *cut, color=hsv(k / n, 0.5, 0.95))
+    return scene("nesting_bites", [3.6, 2.8, 4.4], [0, -0.1, 0], 42,
+                 [obj("onion", node, [0.8, 0.8, 0.8])])
+
+
 EXTRA = {f.__name__: f for f in (forest_pitted, forest_objects4, capsules3000,
                                  forest_deep4, forest4, forest_tori,
                                  forest_arches, tori_deep, knob_union,
                                  knob_cut_field, knob_cut_union,
                                  knob_mixed_union, knob_mixed_cut_union,
-                                 sweep_union, sweep_cut_union)}
+                                 sweep_union, sweep_cut_union, nesting_deep,
+                                 nesting_bites)}
 
 
 def main(argv):

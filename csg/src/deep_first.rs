@@ -31,13 +31,13 @@ use super::{cand_key, cand_of_key, leaf_query, NodeKind, Program, RayCtx, Scratc
 use crate::counts;
 
 /// The most leaves a sweep takes.
-pub const DEEP_LEAVES: usize = 256;
+pub const DEEP_LEAVES: usize = 1024;
 
 /// The most crossings a sweep takes.
-const DEEP_CROSSINGS: usize = 1024;
+const DEEP_CROSSINGS: usize = 4096;
 
 /// The deepest node a sweep takes.
-const DEEP_DEPTH: usize = 160;
+const DEEP_DEPTH: usize = 512;
 
 /// A post-order step of the tree's value: a leaf's word, or an inner
 /// node's operation on the last `count` values.

@@ -32,7 +32,7 @@ use rothray_primitives::ray_plane::RayPlane;
 
 /// Cached leaves per packet (a direct-mapped table by leaf index: a
 /// collision only costs a second solve).
-const SLOTS: usize = 256;
+const SLOTS: usize = 1024;
 
 /// Cached tori per packet (as [`SLOTS`]; a prep is about 1.5 KB for eight lanes).
 const TORUS_SLOTS: usize = 8;
