@@ -100,6 +100,10 @@ pub(crate) struct DeepLists {
     /// Per crossing: its leaf slot and its surface as the tree's.
     cross: Vec<(u32, Surf)>,
     values: Vec<u64>,
+    /// The leaves' states at the range's start (for [`Sweep::settled`]).
+    init: Vec<u64>,
+    /// [`Sweep::settled`]'s words.
+    combo: Vec<u64>,
 }
 
 impl Program {
@@ -160,7 +164,7 @@ impl Program {
     /// [`Program::deep_first`], `None` for [`DeepFirst::Unknown`].
     #[inline(always)]
     fn deep_sweep(&self, leaves: &LeafTable, ctx: &RayCtx, root: u32, range: (f32, f32), scratch: &mut Scratch) -> Option<DeepFirst> {
-        let DeepLists { shape, words, keys, cross, values } = &mut scratch.deep;
+        let DeepLists { shape, words, keys, cross, values, init, combo } = &mut scratch.deep;
         if shape.key != (self.serial, root) || self.serial == 0 {
             self.deep_shape(root, shape);
         }
@@ -211,6 +215,7 @@ impl Program {
             return None;
         }
         keys.sort_unstable();
+        init.clone_from(words);
         let eps2 = 2.0 * ctx.eps;
         let place = |i: usize| cand_of_key(keys[i]).1;
         // Gap `g` lies between crossings `g - 1` and `g` (gap 0 from the
@@ -233,9 +238,16 @@ impl Program {
             if inside != 0 {
                 let g = g0 + inside.trailing_zeros() as usize;
                 // The entry is crossing g - 1; the sweep is exact where the
-                // crossings up to the next one are apart.
+                // crossings up to the next one are apart (or those before
+                // it are in harmless clusters, and it stands alone).
                 let last = (g + 1).min(keys.len());
-                if !apart((0..last).map(place), range, eps2, last == keys.len()) {
+                let alone = |i: usize| {
+                    let before = if i == 0 { range.0 } else { place(i - 1) };
+                    let after = if i + 1 < keys.len() { place(i + 1) } else { range.1 };
+                    place(i) - before > eps2 && !(after - place(i) <= eps2)
+                };
+                let sweep = Sweep { keys, cross, steps: &shape.steps, range, eps2 };
+                if !alone(g - 1) || !sweep.exact(last, last == keys.len(), (init, combo, values)) {
                     return None;
                 }
                 let (i, _) = cand_of_key(keys[g - 1]);
@@ -254,7 +266,8 @@ impl Program {
             g0 += 64;
         }
         // Never inside: no surface, where every crossing is apart.
-        apart((0..keys.len()).map(place), range, eps2, true).then_some(DeepFirst::Sure(None))
+        let sweep = Sweep { keys, cross, steps: &shape.steps, range, eps2 };
+        sweep.exact(keys.len(), true, (init, combo, values)).then_some(DeepFirst::Sure(None))
     }
 
     /// Is node `n` a tile's narrow union written for a wide one, which a
@@ -359,6 +372,84 @@ fn drop_before(cut: f32, (keys, cross): (&mut Vec<u64>, &[(u32, Surf)]), words: 
     last
 }
 
+/// Bit `c` of `COMBO[j]` is bit `j` of `c`: the 64 states of six leaves.
+const COMBO: [u64; 6] = [
+    0xaaaa_aaaa_aaaa_aaaa,
+    0xcccc_cccc_cccc_cccc,
+    0xf0f0_f0f0_f0f0_f0f0,
+    0xff00_ff00_ff00_ff00,
+    0xffff_0000_ffff_0000,
+    0xffff_ffff_0000_0000,
+];
+
+/// The sorted crossings of a sweep, read for [`Sweep::settled`].
+struct Sweep<'a> {
+    keys: &'a [u64],
+    cross: &'a [(u32, Surf)],
+    steps: &'a [Step],
+    range: (f32, f32),
+    eps2: f32,
+}
+
+impl Sweep<'_> {
+    /// Are the crossings before `upto` (and the range's end, with
+    /// `to_end`) apart, or in clusters that cannot change the answer
+    /// ([`Sweep::settled`])?
+    #[inline(always)]
+    fn exact(&self, upto: usize, to_end: bool, bufs: (&[u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
+        apart((0..upto).map(|i| cand_of_key(self.keys[i]).1), self.range, self.eps2, to_end) || self.settled(upto, to_end, bufs)
+    }
+
+    /// Where crossings are within `2 eps` of one another (or of the
+    /// range's ends), `combine` may fuse them, merge or drop what lies
+    /// between them: each node's result there is its operation on its
+    /// operands' values a little before or after, so each leaf crossed in
+    /// such a cluster may be read inside or outside. The tree cannot be
+    /// inside there when it is outside for every way of reading them (at
+    /// most six leaves: their 64 states in one word). Are all clusters
+    /// among the crossings before `upto` (and at the end, with `to_end`)
+    /// such? Then the exact set's answer is the full diagram's.
+    /// (Slow path: only where crossings are not apart.)
+    #[inline(never)]
+    fn settled(&self, upto: usize, to_end: bool, (init, combo, values): (&[u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
+        let place = |i: usize| cand_of_key(self.keys[i]).1;
+        let slot = |i: usize| self.cross[cand_of_key(self.keys[i]).0 as usize].0 as usize;
+        let mut state = init.to_vec();
+        let mut i = 0;
+        while i < upto {
+            // The cluster from crossing i: crossings (and the range's
+            // start) each within 2 eps of the one before.
+            let near_start = i == 0 && !(place(0) - self.range.0 > self.eps2);
+            let mut j = i + 1;
+            while j < self.keys.len() && !(place(j) - place(j - 1) > self.eps2) {
+                j += 1;
+            }
+            let near_end = j == self.keys.len() && to_end && !(self.range.1 - place(j - 1) > self.eps2);
+            if j - i > 1 || near_start || near_end {
+                let mut crossed: Vec<usize> = (i..j).map(slot).collect();
+                crossed.sort_unstable();
+                crossed.dedup();
+                if crossed.len() > COMBO.len() {
+                    return false;
+                }
+                combo.clone_from(&state);
+                for (k, &s) in crossed.iter().enumerate() {
+                    combo[s] = COMBO[k];
+                }
+                let all = if crossed.len() == 6 { !0 } else { (1u64 << (1 << crossed.len())) - 1 };
+                if tree_value(self.steps, combo, values) & all != 0 {
+                    return false;
+                }
+            }
+            for k in i..j {
+                state[slot(k)] ^= !0;
+            }
+            i = j;
+        }
+        true
+    }
+}
+
 /// Are the sorted `places` more than `eps2` apart, the first from the
 /// range's start, and (with `to_end`) the last from its end?
 fn apart(places: impl Iterator<Item = f32>, range: (f32, f32), eps2: f32, to_end: bool) -> bool {
@@ -370,4 +461,48 @@ fn apart(places: impl Iterator<Item = f32>, range: (f32, f32), eps2: f32, to_end
         prev = t;
     }
     !to_end || range.1 == f32::INFINITY || range.1 - prev > eps2
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Sorted crossings `(place, slot)` as a sweep keeps them.
+    fn crossings(c: &[(f32, u32)]) -> (Vec<u64>, Vec<(u32, Surf)>) {
+        let keys = c.iter().enumerate().map(|(i, &(t, _))| cand_key(i as u32, t)).collect();
+        let cross = c.iter().map(|&(_, slot)| (slot, Surf::new(slot, 0))).collect();
+        (keys, cross)
+    }
+
+    #[test]
+    fn clusters_settle_only_where_no_reading_is_inside() {
+        // L0 minus (L1 union L2), eps2 = 0.1. L0 from 1 to 9; L1 and L2
+        // cross within 0.1 of each other twice.
+        let steps = [Step::Leaf(0), Step::Leaf(1), Step::Leaf(2), Step::Node(NodeKind::Union, 2), Step::Node(NodeKind::Difference, 2)];
+        let (init, mut combo, mut values) = (vec![0u64; 3], Vec::new(), vec![0u64; 3]);
+        let settled = |c: &[(f32, u32)], upto: usize, combo: &mut Vec<u64>, values: &mut Vec<u64>| {
+            let (keys, cross) = crossings(c);
+            let sweep = Sweep { keys: &keys, cross: &cross, steps: &steps, range: (0.0, 20.0), eps2: 0.1 };
+            (sweep.settled(upto, false, (&init, combo, values)), sweep.exact(upto, false, (&init, combo, values)))
+        };
+        // L1 and L2 meet within 0.1 before L0 enters: outside L0 every
+        // reading is outside the tree.
+        let before = [(0.50, 1), (0.55, 2), (1.0, 0), (3.0, 1), (4.0, 2), (9.0, 0)];
+        assert_eq!(settled(&before, 3, &mut combo, &mut values), (true, true));
+        // The same meeting inside L0: L1 leaves as L2 enters, a gap under
+        // 0.1 in the subtrahend that a reading may leave open.
+        let inside = [(1.0, 0), (2.0, 1), (3.0, 1), (3.05, 2), (4.0, 2), (9.0, 0)];
+        assert_eq!(settled(&inside, 5, &mut combo, &mut values), (false, false));
+        // Apart crossings need no cluster test.
+        let apart_ = [(1.0, 0), (2.0, 1), (3.0, 2), (4.0, 1), (5.0, 2), (9.0, 0)];
+        assert_eq!(settled(&apart_, 6, &mut combo, &mut values), (true, true));
+        // A crossing within 0.1 of the range's start is a cluster with it.
+        let start = [(0.05, 1), (1.0, 0), (2.0, 1), (9.0, 0)];
+        assert!(settled(&start, 2, &mut combo, &mut values).0);
+        // Seven leaves crossed in one cluster are more than one word holds.
+        let many_steps: Vec<Step> = (0..8).map(Step::Leaf).chain([Step::Node(NodeKind::Union, 8)]).collect();
+        let (keys, cross) = crossings(&(0..8).map(|j| (5.0 + 0.01 * j as f32, j)).collect::<Vec<_>>());
+        let sweep = Sweep { keys: &keys, cross: &cross, steps: &many_steps, range: (0.0, 20.0), eps2: 0.1 };
+        assert!(!sweep.settled(8, false, (&[0; 8], &mut combo, &mut vec![0; 8])));
+    }
 }
