@@ -102,8 +102,8 @@ pub(crate) struct DeepLists {
     values: Vec<u64>,
     /// The leaves' states at the range's start (for [`Sweep::settled`]).
     init: Vec<u64>,
-    /// [`Sweep::settled`]'s words.
-    combo: Vec<u64>,
+    /// [`Sweep::settled`]'s leaves of unknown state.
+    unknown: Vec<u64>,
 }
 
 impl Program {
@@ -164,7 +164,7 @@ impl Program {
     /// [`Program::deep_first`], `None` for [`DeepFirst::Unknown`].
     #[inline(always)]
     fn deep_sweep(&self, leaves: &LeafTable, ctx: &RayCtx, root: u32, range: (f32, f32), scratch: &mut Scratch) -> Option<DeepFirst> {
-        let DeepLists { shape, words, keys, cross, values, init, combo } = &mut scratch.deep;
+        let DeepLists { shape, words, keys, cross, values, init, unknown } = &mut scratch.deep;
         if shape.key != (self.serial, root) || self.serial == 0 {
             self.deep_shape(root, shape);
         }
@@ -247,7 +247,7 @@ impl Program {
                     place(i) - before > eps2 && !(after - place(i) <= eps2)
                 };
                 let sweep = Sweep { keys, cross, steps: &shape.steps, range, eps2 };
-                if !alone(g - 1) || !sweep.exact(last, last == keys.len(), (init, combo, values)) {
+                if !alone(g - 1) || !sweep.exact(last, last == keys.len(), (init, unknown, values)) {
                     return None;
                 }
                 let (i, _) = cand_of_key(keys[g - 1]);
@@ -267,7 +267,7 @@ impl Program {
         }
         // Never inside: no surface, where every crossing is apart.
         let sweep = Sweep { keys, cross, steps: &shape.steps, range, eps2 };
-        sweep.exact(keys.len(), true, (init, combo, values)).then_some(DeepFirst::Sure(None))
+        sweep.exact(keys.len(), true, (init, unknown, values)).then_some(DeepFirst::Sure(None))
     }
 
     /// Is node `n` a tile's narrow union written for a wide one, which a
@@ -372,16 +372,6 @@ fn drop_before(cut: f32, (keys, cross): (&mut Vec<u64>, &[(u32, Surf)]), words: 
     last
 }
 
-/// Bit `c` of `COMBO[j]` is bit `j` of `c`: the 64 states of six leaves.
-const COMBO: [u64; 6] = [
-    0xaaaa_aaaa_aaaa_aaaa,
-    0xcccc_cccc_cccc_cccc,
-    0xf0f0_f0f0_f0f0_f0f0,
-    0xff00_ff00_ff00_ff00,
-    0xffff_0000_ffff_0000,
-    0xffff_ffff_0000_0000,
-];
-
 /// The sorted crossings of a sweep, read for [`Sweep::settled`].
 struct Sweep<'a> {
     keys: &'a [u64],
@@ -405,16 +395,21 @@ impl Sweep<'_> {
     /// between them: each node's result there is its operation on its
     /// operands' values a little before or after, so each leaf crossed in
     /// such a cluster may be read inside or outside. The tree cannot be
-    /// inside there when it is outside for every way of reading them (at
-    /// most six leaves: their 64 states in one word). Are all clusters
-    /// among the crossings before `upto` (and at the end, with `to_end`)
-    /// such? Then the exact set's answer is the full diagram's.
-    /// (Slow path: only where crossings are not apart.)
+    /// inside there when it is outside for every way of reading them:
+    /// its value in three-valued logic, those leaves unknown, is
+    /// "outside" (exact for a tree, where each leaf is read once). Are
+    /// all clusters among the crossings before `upto` (and at the end,
+    /// with `to_end`) such? Then the exact set's answer is the full
+    /// diagram's. (Slow path: only where crossings are not apart;
+    /// benches/scenes/nesting's shadow rays leave every wedge's box at
+    /// once, through the plane of their tops.)
     #[inline(never)]
-    fn settled(&self, upto: usize, to_end: bool, (init, combo, values): (&[u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
+    fn settled(&self, upto: usize, to_end: bool, (init, unknown, values): (&[u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
         let place = |i: usize| cand_of_key(self.keys[i]).1;
         let slot = |i: usize| self.cross[cand_of_key(self.keys[i]).0 as usize].0 as usize;
         let mut state = init.to_vec();
+        unknown.clear();
+        unknown.resize(init.len(), 0);
         let mut i = 0;
         while i < upto {
             // The cluster from crossing i: crossings (and the range's
@@ -426,18 +421,14 @@ impl Sweep<'_> {
             }
             let near_end = j == self.keys.len() && to_end && !(self.range.1 - place(j - 1) > self.eps2);
             if j - i > 1 || near_start || near_end {
-                let mut crossed: Vec<usize> = (i..j).map(slot).collect();
-                crossed.sort_unstable();
-                crossed.dedup();
-                if crossed.len() > COMBO.len() {
-                    return false;
+                for k in i..j {
+                    unknown[slot(k)] = !0;
                 }
-                combo.clone_from(&state);
-                for (k, &s) in crossed.iter().enumerate() {
-                    combo[s] = COMBO[k];
+                let may = tree_may(self.steps, (&state, unknown), values);
+                for k in i..j {
+                    unknown[slot(k)] = 0;
                 }
-                let all = if crossed.len() == 6 { !0 } else { (1u64 << (1 << crossed.len())) - 1 };
-                if tree_value(self.steps, combo, values) & all != 0 {
+                if may {
                     return false;
                 }
             }
@@ -448,6 +439,51 @@ impl Sweep<'_> {
         }
         true
     }
+}
+
+/// May the tree be inside where its leaves are inside as `state` says,
+/// except those `unknown` says may be either? (Three-valued logic: each
+/// value a pair, certainly inside and possibly inside, on the stack
+/// `values`, two words a value.)
+fn tree_may(steps: &[Step], (state, unknown): (&[u64], &[u64]), values: &mut Vec<u64>) -> bool {
+    values.clear();
+    for &s in steps {
+        match s {
+            Step::Leaf(slot) => {
+                let (st, un) = (state[slot as usize], unknown[slot as usize]);
+                values.extend([st & !un, st | un]);
+            }
+            Step::Node(kind, count) => {
+                let base = values.len() - 2 * count as usize;
+                let ops = &values[base..];
+                let sure = |k: usize| ops[2 * k];
+                let may = |k: usize| ops[2 * k + 1];
+                let (mut lo, mut hi) = (0u64, 0u64);
+                match kind {
+                    NodeKind::Union => {
+                        for k in 0..count as usize {
+                            (lo, hi) = (lo | sure(k), hi | may(k));
+                        }
+                    }
+                    NodeKind::Intersection => {
+                        (lo, hi) = (!0, !0);
+                        for k in 0..count as usize {
+                            (lo, hi) = (lo & sure(k), hi & may(k));
+                        }
+                    }
+                    _ => {
+                        (lo, hi) = (sure(0), may(0));
+                        for k in 1..count as usize {
+                            (lo, hi) = (lo & !may(k), hi & !sure(k));
+                        }
+                    }
+                }
+                values.truncate(base);
+                values.extend([lo, hi]);
+            }
+        }
+    }
+    values.get(1).is_some_and(|&hi| hi != 0)
 }
 
 /// Are the sorted `places` more than `eps2` apart, the first from the
@@ -474,35 +510,48 @@ mod tests {
         (keys, cross)
     }
 
+    /// `(settled, exact)` of the crossings `c` before `upto` of the tree
+    /// `steps`, every leaf outside at the start, eps2 = 0.1.
+    fn judge(steps: &[Step], c: &[(f32, u32)], upto: usize) -> (bool, bool) {
+        let (keys, cross) = crossings(c);
+        let init = vec![0u64; steps.iter().filter(|s| matches!(s, Step::Leaf(_))).count()];
+        let (mut unknown, mut values) = (Vec::new(), Vec::new());
+        let sweep = Sweep { keys: &keys, cross: &cross, steps, range: (0.0, 20.0), eps2: 0.1 };
+        (sweep.settled(upto, false, (&init, &mut unknown, &mut values)), sweep.exact(upto, false, (&init, &mut unknown, &mut values)))
+    }
+
     #[test]
     fn clusters_settle_only_where_no_reading_is_inside() {
-        // L0 minus (L1 union L2), eps2 = 0.1. L0 from 1 to 9; L1 and L2
-        // cross within 0.1 of each other twice.
+        // L0 minus (L1 union L2). L0 from 1 to 9; L1 and L2 cross within
+        // 0.1 of each other.
         let steps = [Step::Leaf(0), Step::Leaf(1), Step::Leaf(2), Step::Node(NodeKind::Union, 2), Step::Node(NodeKind::Difference, 2)];
-        let (init, mut combo, mut values) = (vec![0u64; 3], Vec::new(), vec![0u64; 3]);
-        let settled = |c: &[(f32, u32)], upto: usize, combo: &mut Vec<u64>, values: &mut Vec<u64>| {
-            let (keys, cross) = crossings(c);
-            let sweep = Sweep { keys: &keys, cross: &cross, steps: &steps, range: (0.0, 20.0), eps2: 0.1 };
-            (sweep.settled(upto, false, (&init, combo, values)), sweep.exact(upto, false, (&init, combo, values)))
-        };
-        // L1 and L2 meet within 0.1 before L0 enters: outside L0 every
-        // reading is outside the tree.
-        let before = [(0.50, 1), (0.55, 2), (1.0, 0), (3.0, 1), (4.0, 2), (9.0, 0)];
-        assert_eq!(settled(&before, 3, &mut combo, &mut values), (true, true));
-        // The same meeting inside L0: L1 leaves as L2 enters, a gap under
-        // 0.1 in the subtrahend that a reading may leave open.
-        let inside = [(1.0, 0), (2.0, 1), (3.0, 1), (3.05, 2), (4.0, 2), (9.0, 0)];
-        assert_eq!(settled(&inside, 5, &mut combo, &mut values), (false, false));
+        // Before L0 enters: outside L0 every reading is outside the tree.
+        assert_eq!(judge(&steps, &[(0.50, 1), (0.55, 2), (1.0, 0), (3.0, 1), (4.0, 2), (9.0, 0)], 3), (true, true));
+        // Inside L0: L1 leaves as L2 enters, a gap under 0.1 in the
+        // subtrahend that a reading may leave open.
+        assert_eq!(judge(&steps, &[(1.0, 0), (2.0, 1), (3.0, 1), (3.05, 2), (4.0, 2), (9.0, 0)], 5), (false, false));
         // Apart crossings need no cluster test.
-        let apart_ = [(1.0, 0), (2.0, 1), (3.0, 2), (4.0, 1), (5.0, 2), (9.0, 0)];
-        assert_eq!(settled(&apart_, 6, &mut combo, &mut values), (true, true));
+        assert_eq!(judge(&steps, &[(1.0, 0), (2.0, 1), (3.0, 2), (4.0, 1), (5.0, 2), (9.0, 0)], 6), (true, true));
         // A crossing within 0.1 of the range's start is a cluster with it.
-        let start = [(0.05, 1), (1.0, 0), (2.0, 1), (9.0, 0)];
-        assert!(settled(&start, 2, &mut combo, &mut values).0);
-        // Seven leaves crossed in one cluster are more than one word holds.
-        let many_steps: Vec<Step> = (0..8).map(Step::Leaf).chain([Step::Node(NodeKind::Union, 8)]).collect();
-        let (keys, cross) = crossings(&(0..8).map(|j| (5.0 + 0.01 * j as f32, j)).collect::<Vec<_>>());
-        let sweep = Sweep { keys: &keys, cross: &cross, steps: &many_steps, range: (0.0, 20.0), eps2: 0.1 };
-        assert!(!sweep.settled(8, false, (&[0; 8], &mut combo, &mut vec![0; 8])));
+        assert_eq!(judge(&steps, &[(0.05, 1), (1.0, 0), (2.0, 1), (9.0, 0)], 2), (true, true));
+        assert_eq!(judge(&steps, &[(0.05, 0), (1.0, 1), (2.0, 1), (9.0, 0)], 2), (false, false));
+        // L0 minus eight leaves that all end in one cluster: inside L0,
+        // where a reading may open a gap, not settled; past L0 (the wedges'
+        // tops above benches/scenes/nesting), settled.
+        let eight: Vec<Step> = (0..9).map(Step::Leaf).chain([Step::Node(NodeKind::Difference, 9)]).collect();
+        let mut c: Vec<(f32, u32)> = vec![(0.2, 0), (9.0, 0)];
+        c.extend((1..9).map(|j| (0.5 + 0.3 * j as f32, j)));
+        c.extend((1..9).map(|j| (5.0 + 0.01 * j as f32, j)));
+        c.sort_by(|a, b| a.0.total_cmp(&b.0));
+        assert_eq!(judge(&eight, &c, c.len()), (false, false), "a cluster inside L0");
+        let mut c: Vec<(f32, u32)> = vec![(0.2, 0), (9.0, 0)];
+        c.extend((1..9).map(|j| (0.5 + 0.3 * j as f32, j)));
+        c.extend((1..9).map(|j| (12.0 + 0.01 * j as f32, j)));
+        c.sort_by(|a, b| a.0.total_cmp(&b.0));
+        assert_eq!(judge(&eight, &c, c.len()), (true, true), "a cluster past L0");
+        // A union of eight leaves entering in one cluster may be inside.
+        let union: Vec<Step> = (0..8).map(Step::Leaf).chain([Step::Node(NodeKind::Union, 8)]).collect();
+        let c: Vec<(f32, u32)> = (0..8).map(|j| (5.0 + 0.01 * j as f32, j)).collect();
+        assert_eq!(judge(&union, &c, 8), (false, false));
     }
 }
