@@ -199,16 +199,22 @@ def nesting():
     than the one above it, so the cut-away wedge winds down like a stair.
     (40 levels took 9.5 s a frame in rothray and 80 s in POV-Ray at
     1920x1080 on this machine: every ray that enters sees every shell.)"""
-    n = 32
-    core = sphere([0, 0, 0], 0.2, color=[1, 0.9, 0.3])
-    node = core
+    return onion("nesting", 32, (0.056, 0.03), (4, 0.015))
+
+
+def onion(name, n, shells, wedges):
+    """`n` nested levels as scenes/nesting has them: shell k of radius
+    2 - k d and thickness w (`shells` = (d, w)), its wedge turned a degrees
+    a level, its floor raised h a level (`wedges` = (a, h))."""
+    (d, w), (a, h) = shells, wedges
+    node = sphere([0, 0, 0], 0.2, color=[1, 0.9, 0.3])
     for k in reversed(range(n)):
-        r = 2.0 - k * 0.056
-        shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - 0.03))
-        wedge = X(box([0, -0.5 + 0.015 * k, 0], [3, 3, 3]),
-                  rotate=[0, -4 * k, 0], color=[0.3, 0.6, 0.9])
+        r = 2.0 - k * d
+        shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - w))
+        wedge = X(box([0, -0.5 + h * k, 0], [3, 3, 3]),
+                  rotate=[0, -a * k, 0], color=[0.3, 0.6, 0.9])
         node = D(U(shell, node), wedge, color=hsv(k / n, 0.5, 0.95))
-    return scene("nesting", [3.6, 2.8, 4.4], [0, -0.1, 0], 42,
+    return scene(name, [3.6, 2.8, 4.4], [0, -0.1, 0], 42,
                  [obj("onion", node, [0.8, 0.8, 0.8])])
 
 
@@ -840,16 +846,7 @@ def nesting_deep():
     """scenes/nesting 100 levels deep (301 leaves): thinner shells, the
     wedge turned 2.4 degrees a level. Not in the suite:
     `gen.py --out DIR nesting_deep`."""
-    n = 100
-    node = sphere([0, 0, 0], 0.2, color=[1, 0.9, 0.3])
-    for k in reversed(range(n)):
-        r = 2.0 - k * 0.018
-        shell = D(sphere([0, 0, 0], r), sphere([0, 0, 0], r - 0.009))
-        wedge = X(box([0, -0.5 + 0.005 * k, 0], [3, 3, 3]),
-                  rotate=[0, -2.4 * k, 0], color=[0.3, 0.6, 0.9])
-        node = D(U(shell, node), wedge, color=hsv(k / n, 0.5, 0.95))
-    return scene("nesting_deep", [3.6, 2.8, 4.4], [0, -0.1, 0], 42,
-                 [obj("onion", node, [0.8, 0.8, 0.8])])
+    return onion("nesting_deep", 100, (0.018, 0.009), (2.4, 0.005))
 
 
 def nesting_bites():
