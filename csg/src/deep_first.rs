@@ -10,8 +10,13 @@
 //! diagram fuses, merges or drops anything there, so the diagram's first
 //! span is the exact set operation's. Its entry is a leaf's own crossing,
 //! that leaf's surface flipped once for each difference it is subtracted
-//! by. (Elsewhere the sweep answers nothing and the caller goes on as
-//! before: the masked try, then the redo in full.)
+//! by. Two widenings: crossings before the nearest entry of a leaf no
+//! difference subtracts only set the leaves' states (the tree cannot be
+//! inside there; `drop_before`), and a cluster of crossings within
+//! `2 eps` is harmless where the tree is outside however its leaves are
+//! read there (`Sweep::settled`). Elsewhere (an entry in a cluster, the
+//! range starting inside) the sweep answers nothing and the caller goes
+//! on as before: the masked try, then the redo in full.
 //!
 //! How: the crossings are sorted once, and the tree's value is made for
 //! 64 of the gaps between them at a time: each leaf's inside-ness on those
