@@ -146,7 +146,9 @@ impl Program {
                 shape.steps.push(Step::Node(kind, self.count[nu]));
                 continue;
             }
-            if self.wide[nu] != u32::MAX || depth >= DEEP_DEPTH || self.narrowed(n) {
+            // (A node without operands is not one the tree's value can
+            // read: its step would take nothing off the stack.)
+            if self.wide[nu] != u32::MAX || self.count[nu] == 0 || depth >= DEEP_DEPTH || self.narrowed(n) {
                 return;
             }
             stack.push((n, flip, positive, depth, true));
