@@ -105,10 +105,13 @@ pub(crate) struct DeepLists {
     /// Per crossing: its leaf slot and its surface as the tree's.
     cross: Vec<(u32, Surf)>,
     values: Vec<u64>,
-    /// The leaves' states at the range's start (for [`Sweep::settled`]).
+    /// The leaves' states at the range's start (for [`Sweep::settled`],
+    /// which moves them on).
     init: Vec<u64>,
     /// [`Sweep::settled`]'s leaves of unknown state.
     unknown: Vec<u64>,
+    /// [`tree_may`]'s stack (two words a value).
+    pairs: Vec<u64>,
 }
 
 impl Program {
@@ -127,7 +130,6 @@ impl Program {
         shape.key = (self.serial, root);
         shape.leaves.clear();
         shape.steps.clear();
-        // (node, flip, depth, children done)
         // (node, flip, positive, depth, children done)
         let mut stack = vec![(root, false, true, 0usize, false)];
         shape.fits = false;
@@ -171,7 +173,7 @@ impl Program {
     /// [`Program::deep_first`], `None` for [`DeepFirst::Unknown`].
     #[inline(always)]
     fn deep_sweep(&self, leaves: &LeafTable, ctx: &RayCtx, root: u32, range: (f32, f32), scratch: &mut Scratch) -> Option<DeepFirst> {
-        let DeepLists { shape, words, keys, cross, values, init, unknown } = &mut scratch.deep;
+        let DeepLists { shape, words, keys, cross, values, init, unknown, pairs } = &mut scratch.deep;
         if shape.key != (self.serial, root) || self.serial == 0 {
             self.deep_shape(root, shape);
         }
@@ -254,7 +256,7 @@ impl Program {
                     place(i) - before > eps2 && !(after - place(i) <= eps2)
                 };
                 let sweep = Sweep { keys, cross, steps: &shape.steps, range, eps2 };
-                if !alone(g - 1) || !sweep.exact(last, last == keys.len(), (init, unknown, values)) {
+                if !alone(g - 1) || !sweep.exact(last, last == keys.len(), (init, unknown, pairs)) {
                     return None;
                 }
                 let (i, _) = cand_of_key(keys[g - 1]);
@@ -274,7 +276,7 @@ impl Program {
         }
         // Never inside: no surface, where every crossing is apart.
         let sweep = Sweep { keys, cross, steps: &shape.steps, range, eps2 };
-        sweep.exact(keys.len(), true, (init, unknown, values)).then_some(DeepFirst::Sure(None))
+        sweep.exact(keys.len(), true, (init, unknown, pairs)).then_some(DeepFirst::Sure(None))
     }
 
     /// Is node `n` a tile's narrow union written for a wide one, which a
@@ -393,10 +395,13 @@ impl Sweep<'_> {
     /// `to_end`) apart, or in clusters that cannot change the answer
     /// ([`Sweep::settled`])?
     #[inline(always)]
-    fn exact(&self, upto: usize, to_end: bool, bufs: (&[u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
+    fn exact(&self, upto: usize, to_end: bool, bufs: (&mut [u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
         apart((0..upto).map(|i| cand_of_key(self.keys[i]).1), self.range, self.eps2, to_end) || self.settled(upto, to_end, bufs)
     }
 
+    /// `state` holds the leaves' states at the range's start, and is moved
+    /// on crossing by crossing (a sweep asks this once).
+    ///
     /// Where crossings are within `2 eps` of one another (or of the
     /// range's ends), `combine` may fuse them, merge or drop what lies
     /// between them: each node's result there is its operation on its
@@ -411,12 +416,11 @@ impl Sweep<'_> {
     /// benches/scenes/nesting's shadow rays leave every wedge's box at
     /// once, through the plane of their tops.)
     #[inline(never)]
-    fn settled(&self, upto: usize, to_end: bool, (init, unknown, values): (&[u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
+    fn settled(&self, upto: usize, to_end: bool, (state, unknown, pairs): (&mut [u64], &mut Vec<u64>, &mut Vec<u64>)) -> bool {
         let place = |i: usize| cand_of_key(self.keys[i]).1;
         let slot = |i: usize| self.cross[cand_of_key(self.keys[i]).0 as usize].0 as usize;
-        let mut state = init.to_vec();
         unknown.clear();
-        unknown.resize(init.len(), 0);
+        unknown.resize(state.len(), 0);
         let mut i = 0;
         while i < upto {
             // The cluster from crossing i: crossings (and the range's
@@ -431,7 +435,7 @@ impl Sweep<'_> {
                 for k in i..j {
                     unknown[slot(k)] = !0;
                 }
-                let may = tree_may(self.steps, (&state, unknown), values);
+                let may = tree_may(self.steps, (state, unknown), pairs);
                 for k in i..j {
                     unknown[slot(k)] = 0;
                 }
@@ -451,18 +455,18 @@ impl Sweep<'_> {
 /// May the tree be inside where its leaves are inside as `state` says,
 /// except those `unknown` says may be either? (Three-valued logic: each
 /// value a pair, certainly inside and possibly inside, on the stack
-/// `values`, two words a value.)
-fn tree_may(steps: &[Step], (state, unknown): (&[u64], &[u64]), values: &mut Vec<u64>) -> bool {
-    values.clear();
+/// `pairs`, two words a value.)
+fn tree_may(steps: &[Step], (state, unknown): (&[u64], &[u64]), pairs: &mut Vec<u64>) -> bool {
+    pairs.clear();
     for &s in steps {
         match s {
             Step::Leaf(slot) => {
                 let (st, un) = (state[slot as usize], unknown[slot as usize]);
-                values.extend([st & !un, st | un]);
+                pairs.extend([st & !un, st | un]);
             }
             Step::Node(kind, count) => {
-                let base = values.len() - 2 * count as usize;
-                let ops = &values[base..];
+                let base = pairs.len() - 2 * count as usize;
+                let ops = &pairs[base..];
                 let sure = |k: usize| ops[2 * k];
                 let may = |k: usize| ops[2 * k + 1];
                 let (mut lo, mut hi) = (0u64, 0u64);
@@ -485,12 +489,12 @@ fn tree_may(steps: &[Step], (state, unknown): (&[u64], &[u64]), values: &mut Vec
                         }
                     }
                 }
-                values.truncate(base);
-                values.extend([lo, hi]);
+                pairs.truncate(base);
+                pairs.extend([lo, hi]);
             }
         }
     }
-    values.get(1).is_some_and(|&hi| hi != 0)
+    pairs.get(1).is_some_and(|&hi| hi != 0)
 }
 
 /// Are the sorted `places` more than `eps2` apart, the first from the
@@ -522,9 +526,10 @@ mod tests {
     fn judge(steps: &[Step], c: &[(f32, u32)], upto: usize) -> (bool, bool) {
         let (keys, cross) = crossings(c);
         let init = vec![0u64; steps.iter().filter(|s| matches!(s, Step::Leaf(_))).count()];
-        let (mut unknown, mut values) = (Vec::new(), Vec::new());
+        let (mut unknown, mut pairs) = (Vec::new(), Vec::new());
         let sweep = Sweep { keys: &keys, cross: &cross, steps, range: (0.0, 20.0), eps2: 0.1 };
-        (sweep.settled(upto, false, (&init, &mut unknown, &mut values)), sweep.exact(upto, false, (&init, &mut unknown, &mut values)))
+        let settled = sweep.settled(upto, false, (&mut init.clone(), &mut unknown, &mut pairs));
+        (settled, sweep.exact(upto, false, (&mut init.clone(), &mut unknown, &mut pairs)))
     }
 
     #[test]

@@ -529,9 +529,8 @@ pub(crate) fn retry_of(program: &Program, leaves: &LeafTable, o: &ObjectInfo) ->
     let masked_first = program.kind[o.root as usize] == rothray_csg::NodeKind::Difference && program.masks_help(o.root);
     let b = &o.bounds;
     let useful = subtree_has_mesh(program, leaves, o.root) && b.is_finite() && !b.is_empty();
-    // (A lone leaf or a small tree has a sure first try, or its own
-    // packet answers: the sweep is for trees the masked try or the redo
-    // would take apart.)
+    // (A lone leaf's first try is sure, or its own packet answers: the
+    // sweep is for trees the masked try or the redo would take apart.)
     let deep = program.kind[o.root as usize] != rothray_csg::NodeKind::Leaf && program.deep_fits(o.root);
     Retry { window: if useful { 0.1 * b.diagonal_length() } else { 0.0 }, masked_first, deep }
 }
